@@ -1,0 +1,120 @@
+"""One error hierarchy for bagport.
+
+Every error says what failed, where (file, topic, timestamp, field) and how to
+fix it.  Constructors take structured fields and build the message, so callers
+cannot forget the location.  ``TransientError`` is the only branch a task
+retries; everything else fails fast.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "AlignmentError",
+    "BagReadError",
+    "BagportError",
+    "ContractError",
+    "DatasetWriteError",
+    "DecodeError",
+    "ManifestError",
+    "TransientError",
+    "ValidationError",
+    "VideoError",
+]
+
+
+def _where(**fields: object) -> str:
+    parts = [f"{name}={value}" for name, value in fields.items() if value is not None]
+    return f" [{', '.join(parts)}]" if parts else ""
+
+
+class BagportError(Exception):
+    """Root of every error bagport raises on purpose."""
+
+
+class TransientError(BagportError):
+    """An I/O failure that may succeed when tried again (network, throttling)."""
+
+
+class ManifestError(BagportError):
+    """The manifest of bags is malformed or names bags that cannot be found."""
+
+    def __init__(self, what: str, *, file: str | None = None, entry: int | None = None, fix: str = "") -> None:
+        self.file = file
+        self.entry = entry
+        where = f"{file}" if file else "manifest"
+        if entry is not None:
+            where += f", bags[{entry}]"
+        super().__init__(f"{where}: {what}" + (f" Fix: {fix}" if fix else ""))
+
+
+class ContractError(BagportError):
+    """The contract YAML is malformed or does not fit the bags."""
+
+    def __init__(
+        self,
+        what: str,
+        *,
+        file: str | None = None,
+        line: int | None = None,
+        field: str | None = None,
+        fix: str = "",
+    ) -> None:
+        self.file = file
+        self.line = line
+        self.field = field
+        where = file or "contract"
+        if line is not None:
+            where += f":{line}"
+        if field:
+            where += f" ({field})"
+        super().__init__(f"{where}: {what}" + (f" Fix: {fix}" if fix else ""))
+
+
+class BagReadError(BagportError):
+    """A bag cannot be opened or read."""
+
+    def __init__(self, what: str, *, uri: str, topic: str | None = None, fix: str = "") -> None:
+        self.uri = uri
+        self.topic = topic
+        super().__init__(f"{uri}: {what}{_where(topic=topic)}" + (f" Fix: {fix}" if fix else ""))
+
+
+class DecodeError(BagportError):
+    """A message cannot be turned into a feature value."""
+
+    def __init__(
+        self,
+        what: str,
+        *,
+        uri: str | None = None,
+        topic: str | None = None,
+        t_ns: int | None = None,
+        fix: str = "",
+    ) -> None:
+        self.uri = uri
+        self.topic = topic
+        self.t_ns = t_ns
+        prefix = f"{uri}: " if uri else ""
+        super().__init__(f"{prefix}{what}{_where(topic=topic, t_ns=t_ns)}" + (f" Fix: {fix}" if fix else ""))
+
+
+class AlignmentError(BagportError):
+    """Streams cannot be put on the frame grid (no overlap, missing data)."""
+
+    def __init__(self, what: str, *, uri: str | None = None, topic: str | None = None, fix: str = "") -> None:
+        self.uri = uri
+        self.topic = topic
+        prefix = f"{uri}: " if uri else ""
+        super().__init__(f"{prefix}{what}{_where(topic=topic)}" + (f" Fix: {fix}" if fix else ""))
+
+
+class VideoError(BagportError):
+    """Encoding, remuxing or decoding a video failed."""
+
+
+class DatasetWriteError(BagportError):
+    """Writing the LeRobot dataset failed; the output folder was left untouched."""
+
+
+class ValidationError(BagportError):
+    """A written dataset violates a LeRobot v3.0 invariant or does not load."""

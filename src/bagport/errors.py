@@ -27,8 +27,20 @@ def _where(**fields: object) -> str:
     return f" [{', '.join(parts)}]" if parts else ""
 
 
+def _rebuild(cls: type[BagportError], message: str, state: dict[str, object]) -> BagportError:
+    error = cls.__new__(cls)
+    Exception.__init__(error, message)
+    error.__dict__.update(state)
+    return error
+
+
 class BagportError(Exception):
     """Root of every error bagport raises on purpose."""
+
+    def __reduce__(self) -> tuple[object, tuple[object, ...]]:
+        # Keyword-only constructors do not survive the default pickling, and errors
+        # cross process boundaries (process pools, Dask workers): rebuild from the message.
+        return (_rebuild, (type(self), str(self), dict(self.__dict__)))
 
 
 class TransientError(BagportError):
@@ -91,11 +103,19 @@ class DecodeError(BagportError):
         t_ns: int | None = None,
         fix: str = "",
     ) -> None:
+        self.what = what
         self.uri = uri
         self.topic = topic
         self.t_ns = t_ns
+        self.fix = fix
         prefix = f"{uri}: " if uri else ""
         super().__init__(f"{prefix}{what}{_where(topic=topic, t_ns=t_ns)}" + (f" Fix: {fix}" if fix else ""))
+
+    def located(self, *, uri: str, topic: str, t_ns: int) -> DecodeError:
+        """The same error with the bag, topic and message time filled in."""
+        return DecodeError(
+            self.what, uri=self.uri or uri, topic=self.topic or topic, t_ns=self.t_ns or t_ns, fix=self.fix
+        )
 
 
 class AlignmentError(BagportError):

@@ -1,0 +1,158 @@
+"""The ``bagport`` command line.
+
+Errors bagport raises on purpose (``BagportError``) print as one paragraph with
+exit code 2; nothing prints a traceback unless ``BAGPORT_DEBUG=1``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from bagport.errors import BagportError
+
+__all__ = ["main"]
+
+
+def _cmd_inspect(args: argparse.Namespace) -> int:
+    from bagport.bags import format_bag_info, open_bag  # noqa: PLC0415 - keep `--help` fast
+
+    for uri in args.uri:
+        with open_bag(uri) as reader:
+            print(format_bag_info(reader.info))
+    return 0
+
+
+def _load_encoder(value: str | None) -> dict[str, Any]:
+    if not value:
+        return {}
+    path = Path(value)
+    if not path.is_file():
+        preset = Path(__file__).resolve().parent.parent / "configs" / "codecs" / f"{value}.yaml"
+        if not preset.is_file():
+            raise BagportError(f"--codec {value!r}: no such file and no preset configs/codecs/{value}.yaml")
+        path = preset
+    data = yaml.safe_load(path.read_text()) or {}
+    if not isinstance(data, dict):
+        raise BagportError(f"--codec {value}: must be a YAML mapping of encoder settings")
+    return data
+
+
+def _cmd_convert(args: argparse.Namespace) -> int:
+    from bagport.config import ConvertConfig  # noqa: PLC0415
+    from bagport.run import summary_json  # noqa: PLC0415
+    from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
+
+    config = ConvertConfig(
+        manifest=args.manifest,
+        contract=args.contract,
+        output=args.output,
+        repo_id=args.repo_id,
+        staging=args.staging,
+        workers=args.workers,
+        runner=args.runner,
+        encoder=_load_encoder(args.codec),
+        overwrite=args.overwrite,
+        keep_staging=args.keep_staging,
+        chunks_size=args.chunks_size,
+        data_files_size_in_mb=args.data_files_size_in_mb,
+        video_files_size_in_mb=args.video_files_size_in_mb,
+    )
+    started = time.perf_counter()
+    report = run_convert(config)
+    print(summary_json(report))
+    wall_s = time.perf_counter() - started
+    print(f"converted {report.duration_s:.1f} s of recordings in {wall_s:.1f} s wall time", file=sys.stderr)
+    return 0
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    from bagport.dataset.validate import validate_dataset  # noqa: PLC0415
+
+    def progress(done: int, total: int) -> None:
+        if done == total or done % 200 == 0:
+            print(f"\rdecoded {done}/{total} frames", end="", file=sys.stderr, flush=True)
+
+    report = validate_dataset(args.root, repo_id=args.repo_id, decode_every=args.every, progress=progress)
+    print(file=sys.stderr)
+    print(
+        f"OK {report.root}: {report.episodes} episode(s), {report.frames} frames, "
+        f"{report.frames_decoded} decoded through LeRobot ({report.video_backend}); videos: "
+        f"{', '.join(report.video_keys) or 'none'}"
+    )
+    return 0
+
+
+def _cmd_synth(args: argparse.Namespace) -> int:
+    from bagport.synth import write_sample_fleet  # noqa: PLC0415
+
+    paths = write_sample_fleet(Path(args.out), episodes=args.episodes, duration_s=args.duration, seed=args.seed)
+    for path in paths:
+        print(path)
+    print(f"wrote {len(paths)} bag(s) and {Path(args.out) / 'manifest.yaml'}", file=sys.stderr)
+    return 0
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="bagport", description="ROS bags -> LeRobot v3.0 datasets.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    convert = sub.add_parser("convert", help="convert the bags of a manifest with a contract (Prefect flow)")
+    convert.add_argument("--manifest", required=True, help="manifest YAML (bags: [{uri, task, metadata}])")
+    convert.add_argument("--contract", required=True, help="contract YAML (Rosetta-compatible)")
+    convert.add_argument("--output", required=True, help="dataset folder to create (LeRobot's root)")
+    convert.add_argument("--repo-id", default=None, help="LeRobot repo id recorded for the dataset")
+    convert.add_argument("--staging", default=None, help="staging store URI (default: <output>.staging)")
+    convert.add_argument("--workers", type=int, default=None, help="parallel episodes (default: CPU count)")
+    convert.add_argument("--runner", choices=["process", "thread"], default="process")
+    convert.add_argument("--codec", default=None, help="encoder preset name in configs/codecs or a YAML file")
+    convert.add_argument("--overwrite", action="store_true", help="replace an existing dataset at --output")
+    convert.add_argument("--keep-staging", action="store_true", help="keep staged episodes after success")
+    convert.add_argument("--chunks-size", type=int, default=1000)
+    convert.add_argument("--data-files-size-in-mb", type=int, default=100)
+    convert.add_argument("--video-files-size-in-mb", type=int, default=200)
+    convert.set_defaults(func=_cmd_convert)
+
+    inspect = sub.add_parser("inspect", help="print what `ros2 bag info` prints, without ROS")
+    inspect.add_argument("uri", nargs="+", help="bag folder, .mcap, .db3 or .bag (local or fsspec URI)")
+    inspect.set_defaults(func=_cmd_inspect)
+
+    validate = sub.add_parser("validate", help="load a dataset with LeRobot and decode every frame")
+    validate.add_argument("root", help="dataset folder")
+    validate.add_argument("--repo-id", default=None)
+    validate.add_argument("--every", type=int, default=1, help="decode every n-th frame (default: all)")
+    validate.set_defaults(func=_cmd_validate)
+
+    synth = sub.add_parser("synth", help="write a synthetic fleet of bags with known ground truth")
+    synth.add_argument("--out", required=True, help="folder for the bags and manifest.yaml")
+    synth.add_argument("--episodes", type=int, default=4)
+    synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
+    synth.add_argument("--seed", type=int, default=0)
+    synth.set_defaults(func=_cmd_synth)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except BagportError as err:
+        if os.environ.get("BAGPORT_DEBUG") == "1":
+            raise
+        print(f"bagport {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"bagport {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# The whole test suite: lint (ruff), types (mypy strict), then pytest (slow end-to-end tests included).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+source scripts/env.sh
+.venv/bin/ruff check src tasks flows tests
+.venv/bin/ruff format --check src tasks flows tests
+.venv/bin/mypy src/bagport tasks flows tests
+.venv/bin/pytest "$@"

@@ -1,0 +1,31 @@
+"""The fixed frame grid: tick k of an episode is at ``start_ns + floor(k * 1e9 / fps)``.
+
+Integer nanoseconds throughout, so ticks never drift however long the episode.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["NS_PER_S", "grid_ticks_ns", "tick_count"]
+
+NS_PER_S = 1_000_000_000
+
+Int64Array = npt.NDArray[np.int64]
+
+
+def tick_count(start_ns: int, end_ns: int, fps: int) -> int:
+    """Number of ticks ``t_k <= end_ns`` for ``k >= 0``; 0 when ``end_ns < start_ns``."""
+    if end_ns < start_ns:
+        return 0
+    # largest k with floor(k * 1e9 / fps) <= span  <=>  k * 1e9 < (span + 1) * fps
+    span = end_ns - start_ns
+    return ((span + 1) * fps - 1) // NS_PER_S + 1
+
+
+def grid_ticks_ns(start_ns: int, end_ns: int, fps: int) -> Int64Array:
+    """Absolute tick times in ns from ``start_ns`` up to and including ``end_ns``."""
+    count = tick_count(start_ns, end_ns, fps)
+    k = np.arange(count, dtype=np.int64)
+    return np.int64(start_ns) + (k * NS_PER_S) // fps

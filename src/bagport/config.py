@@ -1,0 +1,36 @@
+"""The one validated configuration object a conversion run takes."""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, PositiveInt
+
+__all__ = ["ConvertConfig"]
+
+
+class ConvertConfig(BaseModel):
+    """Parameters of ``bagport convert`` / the Prefect ``convert`` flow."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    manifest: str = Field(description="Manifest YAML: local path or fsspec URI.")
+    contract: str = Field(description="Contract YAML: local path or fsspec URI.")
+    output: str = Field(description="Dataset root folder to create (LeRobot's `root`).")
+    repo_id: str | None = Field(default=None, description="LeRobot repo id; default 'local/<output folder name>'.")
+    staging: str | None = Field(default=None, description="Staging store URI; default '<output>.staging' beside it.")
+    workers: PositiveInt | None = Field(default=None, description="Parallel episode workers; default: CPU count.")
+    runner: Literal["process", "thread"] = Field(default="process", description="Task runner for the fan-out.")
+    encoder: dict[str, Any] = Field(default_factory=dict, description="Video encoder settings (see configs/codecs).")
+    chunks_size: PositiveInt = 1000
+    data_files_size_in_mb: PositiveInt = 100
+    video_files_size_in_mb: PositiveInt = 200
+    overwrite: bool = False
+    keep_staging: bool = False
+
+    def resolved_repo_id(self) -> str:
+        name = self.output.rstrip("/").rsplit("/", 1)[-1] or "dataset"
+        return self.repo_id or f"local/{name}"
+
+    def resolved_staging(self) -> str:
+        return self.staging or f"{self.output.rstrip('/')}.staging"

@@ -1,0 +1,158 @@
+"""The contract: a Rosetta-compatible YAML mapping ROS topics to LeRobot features.
+
+The schema follows Rosetta's v1 contract (``robot_type``, ``fps``,
+``observations``, ``actions`` with ``publish``, ``tasks``, ``rewards``,
+``signals``, ``complementary_data``, ``adjunct``) so a contract a team already
+has works unchanged.  Live-only sections are accepted and ignored offline.
+"""
+
+from __future__ import annotations
+
+import re
+from typing import Annotated, Any, Literal
+
+from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
+
+__all__ = [
+    "ActionEntry",
+    "AlignOptions",
+    "Contract",
+    "ImageOptions",
+    "ObservationEntry",
+    "Publish",
+    "ScalarEntry",
+    "Selector",
+    "TaskEntry",
+    "normalize_msgtype",
+]
+
+_MSGTYPE = re.compile(r"^[A-Za-z][\w]*/(msg/)?[A-Za-z][\w]*$")
+
+
+def normalize_msgtype(msgtype: str) -> str:
+    """``sensor_msgs/Image`` (ROS 1 style) -> ``sensor_msgs/msg/Image``."""
+    parts = msgtype.strip().split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return msgtype.strip()
+
+
+def _check_key(key: str) -> str:
+    if not key or "/" in key:
+        raise ValueError(f"feature key {key!r} must be non-empty and must not contain '/' (LeRobot forbids it)")
+    return key
+
+
+def _check_topic(topic: str) -> str:
+    if not topic.startswith("/"):
+        raise ValueError(f"topic {topic!r} must be an absolute ROS topic name starting with '/'")
+    return topic
+
+
+def _check_msgtype(msgtype: str) -> str:
+    if not _MSGTYPE.match(msgtype.strip()):
+        raise ValueError(f"message type {msgtype!r} is not of the form 'pkg/msg/Type' (or ROS 1 'pkg/Type')")
+    return normalize_msgtype(msgtype)
+
+
+def _check_decoder(ref: str) -> str:
+    module, sep, func = ref.partition(":")
+    if not sep or not module or not func:
+        raise ValueError(f"decoder {ref!r} must be 'python.module:function'")
+    return ref
+
+
+FeatureKey = Annotated[str, AfterValidator(_check_key)]
+Topic = Annotated[str, AfterValidator(_check_topic)]
+MsgType = Annotated[str, AfterValidator(_check_msgtype)]
+DecoderRef = Annotated[str, AfterValidator(_check_decoder)]
+StampSource = Literal["header", "receive"]
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, populate_by_name=True)
+
+
+class Selector(_Strict):
+    """Which dimensions of a message make up the feature, in order."""
+
+    names: tuple[str, ...] = ()
+
+
+class ImageOptions(_Strict):
+    resize: tuple[PositiveInt, PositiveInt] | None = None
+    """Target ``[height, width]``."""
+
+
+class AlignOptions(_Strict):
+    strategy: Literal["hold", "asof", "drop"] = "hold"
+    tol_ms: PositiveFloat | None = None
+    stamp: StampSource | None = None
+
+
+class ObservationEntry(_Strict):
+    key: FeatureKey
+    topic: Topic
+    type: MsgType
+    selector: Selector | None = None
+    align: AlignOptions | None = None
+    dtype: str | None = None
+    decoder: DecoderRef | None = None
+    image: ImageOptions | None = None
+    qos: dict[str, Any] | None = None
+
+
+class Publish(_Strict):
+    topic: Topic
+    type: MsgType
+    qos: dict[str, Any] | None = None
+
+
+class ActionEntry(_Strict):
+    key: FeatureKey
+    publish: Publish
+    selector: Selector | None = None
+    align: AlignOptions | None = None
+    dtype: str | None = None
+    decoder: DecoderRef | None = None
+    encoder: str | None = None
+    safety_behavior: str | None = None
+
+
+class TaskEntry(_Strict):
+    key: str = "task"
+    topic: Topic
+    type: MsgType = "std_msgs/msg/String"
+    qos: dict[str, Any] | None = None
+
+
+class ScalarEntry(_Strict):
+    """``rewards``, ``signals`` and ``complementary_data`` entries (dtype required, as in Rosetta)."""
+
+    key: FeatureKey
+    topic: Topic
+    type: MsgType
+    dtype: str
+    selector: Selector | None = None
+    align: AlignOptions | None = None
+    decoder: DecoderRef | None = None
+    qos: dict[str, Any] | None = None
+
+
+class Contract(_Strict):
+    robot_type: str = Field(validation_alias=AliasChoices("robot_type", "name"))
+    fps: PositiveInt = Field(default=30, validation_alias=AliasChoices("fps", "rate_hz"))
+    observations: tuple[ObservationEntry, ...] = ()
+    actions: tuple[ActionEntry, ...] = ()
+    tasks: tuple[TaskEntry, ...] = ()
+    rewards: tuple[ScalarEntry, ...] = ()
+    signals: tuple[ScalarEntry, ...] = ()
+    complementary_data: tuple[ScalarEntry, ...] = ()
+    adjunct: Any = None
+    teleop: Any = None
+    reset: Any = None
+    visualization: Any = None
+    recording: Any = None
+    info: Any = None
+    timestamp_source: StampSource | None = None
+    max_duration_s: PositiveFloat | None = None

@@ -1,0 +1,170 @@
+"""Compile a validated contract into the features a dataset will have."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import StrEnum
+
+from bagport.contract.model import (
+    ActionEntry,
+    Contract,
+    ObservationEntry,
+    ScalarEntry,
+    StampSource,
+    TaskEntry,
+)
+from bagport.errors import ContractError
+from bagport.msgtypes import IMAGE_TYPES
+
+__all__ = ["ContractPlan", "FeatureKind", "FeatureSpec", "SourceSpec", "compile_contract"]
+
+_NUMERIC_DTYPES = frozenset({"float32", "float64", "int32", "int64", "bool", "uint8", "int16", "float16"})
+DEFAULT_VECTOR_DTYPE = "float32"
+
+
+class FeatureKind(StrEnum):
+    VECTOR = "vector"
+    VIDEO = "video"
+
+
+@dataclass(frozen=True, slots=True)
+class SourceSpec:
+    """One contract entry: a topic contributing (part of) a feature."""
+
+    key: str
+    section: str
+    topic: str
+    msgtype: str
+    names: tuple[str, ...]
+    stamp: StampSource | None
+    """``None`` means automatic: the header stamp when the message has a non-zero one, else receive time."""
+    strategy: str
+    tol_ms: float | None
+    resize_hw: tuple[int, int] | None
+    decoder: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class FeatureSpec:
+    key: str
+    kind: FeatureKind
+    dtype: str
+    sources: tuple[SourceSpec, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class ContractPlan:
+    """What a contract asks for, ready for the converter."""
+
+    contract: Contract
+    source_name: str
+    features: tuple[FeatureSpec, ...]
+    task_topics: tuple[TaskEntry, ...]
+
+    @property
+    def fps(self) -> int:
+        return self.contract.fps
+
+    @property
+    def robot_type(self) -> str:
+        return self.contract.robot_type
+
+    @property
+    def sources(self) -> tuple[SourceSpec, ...]:
+        return tuple(src for feature in self.features for src in feature.sources)
+
+    def topics(self) -> tuple[str, ...]:
+        """Every topic the conversion reads, features first, then task topics."""
+        seen = dict.fromkeys([src.topic for src in self.sources] + [t.topic for t in self.task_topics])
+        return tuple(seen)
+
+
+def _source(
+    entry: ObservationEntry | ActionEntry | ScalarEntry, section: str, default_stamp: StampSource | None
+) -> SourceSpec:
+    if isinstance(entry, ActionEntry):
+        topic, msgtype = entry.publish.topic, entry.publish.type
+    else:
+        topic, msgtype = entry.topic, entry.type
+    align = entry.align
+    resize = entry.image.resize if isinstance(entry, ObservationEntry) and entry.image else None
+    return SourceSpec(
+        key=entry.key,
+        section=section,
+        topic=topic,
+        msgtype=msgtype,
+        names=entry.selector.names if entry.selector else (),
+        stamp=align.stamp if align and align.stamp else default_stamp,
+        strategy=align.strategy if align else "hold",
+        tol_ms=align.tol_ms if align else None,
+        resize_hw=(resize[0], resize[1]) if resize else None,
+        decoder=entry.decoder,
+    )
+
+
+def compile_contract(contract: Contract, source_name: str = "contract") -> ContractPlan:
+    """Group entries by key (declaration order) and check what can be checked without a bag."""
+    entries: list[tuple[ObservationEntry | ActionEntry | ScalarEntry, str, StampSource | None]] = []
+    entries += [(e, "observations", None) for e in contract.observations]
+    entries += [(e, "actions", contract.timestamp_source) for e in contract.actions]
+    for section in ("rewards", "signals", "complementary_data"):
+        entries += [(e, section, None) for e in getattr(contract, section)]
+    if not entries:
+        raise ContractError(
+            "declares no features", file=source_name, fix="add at least one entry under 'observations' or 'actions'."
+        )
+
+    grouped: dict[str, list[tuple[SourceSpec, str | None]]] = {}
+    for entry, section, stamp in entries:
+        src = _source(entry, section, stamp)
+        if src.strategy in ("asof",) and src.tol_ms is None:
+            raise ContractError(
+                f"align.strategy 'asof' on {src.topic} needs tol_ms",
+                file=source_name,
+                field=f"{section}[key={src.key}].align.tol_ms",
+                fix="add e.g. 'tol_ms: 50', or use strategy 'hold'.",
+            )
+        grouped.setdefault(src.key, []).append((src, entry.dtype))
+
+    features = []
+    for key, group in grouped.items():
+        sources = tuple(src for src, _ in group)
+        image_flags = {src.msgtype in IMAGE_TYPES for src in sources}
+        if image_flags == {True}:
+            if len(sources) > 1:
+                topics = ", ".join(src.topic for src in sources)
+                raise ContractError(
+                    f"image key {key!r} is declared on several topics ({topics})",
+                    file=source_name,
+                    field=key,
+                    fix="give each camera its own key, e.g. observation.images.front and observation.images.wrist.",
+                )
+            features.append(FeatureSpec(key, FeatureKind.VIDEO, "video", sources))
+            continue
+        if image_flags == {True, False}:
+            raise ContractError(
+                f"key {key!r} mixes image topics and numeric topics",
+                file=source_name,
+                field=key,
+                fix="use separate keys for images and for numeric data.",
+            )
+        dtypes = {dtype for _, dtype in group if dtype}
+        if len(dtypes) > 1:
+            raise ContractError(
+                f"entries of key {key!r} ask for different dtypes {sorted(dtypes)}",
+                file=source_name,
+                field=f"{key}.dtype",
+                fix="use one dtype for every entry of a key.",
+            )
+        dtype = dtypes.pop() if dtypes else DEFAULT_VECTOR_DTYPE
+        if dtype not in _NUMERIC_DTYPES:
+            raise ContractError(
+                f"dtype {dtype!r} of key {key!r} is not a numeric dtype",
+                file=source_name,
+                field=f"{key}.dtype",
+                fix=f"use one of {sorted(_NUMERIC_DTYPES)}.",
+            )
+        features.append(FeatureSpec(key, FeatureKind.VECTOR, dtype, sources))
+    return ContractPlan(
+        contract=contract, source_name=source_name, features=tuple(features), task_topics=contract.tasks
+    )

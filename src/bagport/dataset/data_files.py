@@ -1,0 +1,99 @@
+"""Write ``data/chunk-*/file-*.parquet``: many episodes per file, one row group each."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from fsspec.core import url_to_fs
+
+from bagport.dataset.layout import DATA_PATH, next_chunk_file
+from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
+
+__all__ = ["DataPlacement", "hf_features_metadata", "write_data_files"]
+
+_MB = 1024 * 1024
+
+
+@dataclass(frozen=True, slots=True)
+class DataPlacement:
+    chunk_index: int
+    file_index: int
+    from_index: int
+    to_index: int
+
+
+def hf_features_metadata(vectors: Sequence[StagedFeature]) -> bytes:
+    """The ``huggingface`` schema metadata LeRobot's own writer puts in data parquet files."""
+    features: dict[str, object] = {
+        f.key: {"feature": {"dtype": f.dtype, "_type": "Value"}, "length": f.shape[0], "_type": "List"}
+        for f in vectors
+    }
+    features["timestamp"] = {"dtype": "float32", "_type": "Value"}
+    for name in ("frame_index", "episode_index", "index", "task_index"):
+        features[name] = {"dtype": "int64", "_type": "Value"}
+    return json.dumps({"info": {"features": features}}).encode()
+
+
+def _episode_table(
+    summary: EpisodeSummary, episode_index: int, first_index: int, task_index: dict[str, int], vectors: Sequence[StagedFeature]
+) -> pa.Table:
+    fs, path = url_to_fs(summary.file(FRAMES_FILE))
+    with fs.open(path, "rb") as handle:
+        staged = pq.read_table(handle)
+    frames = staged.num_rows
+    tasks = staged.column("task").to_pylist()
+    columns = {f.key: staged.column(f.key) for f in vectors}
+    columns["timestamp"] = staged.column("timestamp")
+    columns["frame_index"] = staged.column("frame_index")
+    columns["episode_index"] = pa.array(np.full(frames, episode_index, dtype=np.int64))
+    columns["index"] = pa.array(np.arange(first_index, first_index + frames, dtype=np.int64))
+    columns["task_index"] = pa.array(np.array([task_index[t] for t in tasks], dtype=np.int64))
+    return pa.table(columns)
+
+
+def write_data_files(
+    root: Path,
+    summaries: Sequence[EpisodeSummary],
+    vectors: Sequence[StagedFeature],
+    task_index: dict[str, int],
+    *,
+    file_size_in_mb: float,
+    chunks_size: int,
+) -> list[DataPlacement]:
+    """Stream staged frame tables into rotated data files; returns one placement per episode."""
+    placements: list[DataPlacement] = []
+    chunk, file = 0, 0
+    writer: pq.ParquetWriter | None = None
+    schema: pa.Schema | None = None
+    written_bytes = 0
+    first_index = 0
+    limit = file_size_in_mb * _MB
+    metadata = {b"huggingface": hf_features_metadata(vectors)}
+    try:
+        for episode_index, summary in enumerate(summaries):
+            table = _episode_table(summary, episode_index, first_index, task_index, vectors)
+            size = table.nbytes
+            if writer is not None and written_bytes + size > limit:
+                writer.close()
+                writer = None
+                chunk, file = next_chunk_file(chunk, file, chunks_size)
+            if writer is None:
+                path = root / DATA_PATH.format(chunk_index=chunk, file_index=file)
+                path.parent.mkdir(parents=True, exist_ok=True)
+                schema = table.schema.with_metadata(metadata)
+                writer = pq.ParquetWriter(path, schema, compression="snappy")
+                written_bytes = 0
+            writer.write_table(table.cast(schema), row_group_size=max(1, table.num_rows))
+            written_bytes += size
+            placements.append(DataPlacement(chunk, file, first_index, first_index + table.num_rows))
+            first_index += table.num_rows
+    finally:
+        if writer is not None:
+            writer.close()
+    return placements

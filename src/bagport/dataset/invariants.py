@@ -1,0 +1,184 @@
+"""Check a dataset folder against the LeRobot v3.0 invariants, without LeRobot.
+
+Each check raises :class:`ValidationError` on the first violation with the file
+and the exact value that is wrong.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow.parquet as pq
+
+from bagport.dataset.layout import CODEBASE_VERSION, DEFAULT_FEATURES, INFO_PATH, STATS_PATH, TASKS_PATH
+from bagport.errors import ValidationError
+from bagport.stats import STAT_KEYS
+from bagport.video import probe_video
+
+__all__ = ["check_invariants"]
+
+_REQUIRED_INFO = (
+    "codebase_version", "robot_type", "fps", "features", "total_episodes", "total_frames", "total_tasks",
+    "chunks_size", "data_files_size_in_mb", "video_files_size_in_mb", "data_path", "video_path", "splits",
+)
+_TIME_TOL_S = 1e-4
+
+
+def _fail(where: Path | str, what: str) -> ValidationError:
+    return ValidationError(f"{where}: {what}")
+
+
+def _load_info(root: Path) -> dict[str, Any]:
+    path = root / INFO_PATH
+    if not path.is_file():
+        raise _fail(path, "missing; this is not a LeRobot v3.0 dataset folder (pass the dataset root)")
+    info: dict[str, Any] = json.loads(path.read_text())
+    missing = [k for k in _REQUIRED_INFO if k not in info]
+    if missing:
+        raise _fail(path, f"missing fields {missing}")
+    if info["codebase_version"] != CODEBASE_VERSION:
+        raise _fail(path, f"codebase_version is {info['codebase_version']!r}, expected {CODEBASE_VERSION!r}")
+    for stale in ("total_chunks", "total_videos"):
+        if stale in info:
+            raise _fail(path, f"has v2.1 field {stale!r}")
+    for key, feature in info["features"].items():
+        if "/" in key or any("/" in str(n) for n in (feature.get("names") or [])):
+            raise _fail(path, f"feature {key!r}: names must not contain '/'")
+        for field in ("dtype", "shape", "names"):
+            if field not in feature:
+                raise _fail(path, f"feature {key!r} lacks {field!r}")
+    for key, feature in DEFAULT_FEATURES.items():
+        if info["features"].get(key, {}).get("dtype") != feature["dtype"]:
+            raise _fail(path, f"default feature {key!r} missing or not {feature['dtype']}")
+    return info
+
+
+def _check_episode_rows(root: Path, info: dict[str, Any], episodes: pd.DataFrame) -> None:
+    fps = int(info["fps"])
+    where = root / "meta/episodes"
+    if list(episodes["episode_index"]) != list(range(len(episodes))):
+        raise _fail(where, "episode_index is not 0..N-1 in order")
+    if len(episodes) != info["total_episodes"]:
+        raise _fail(where, f"{len(episodes)} episodes but info.total_episodes={info['total_episodes']}")
+    expected_from = 0
+    for row in episodes.itertuples(index=False):
+        ep = row.episode_index
+        start, stop, length = row.dataset_from_index, row.dataset_to_index, row.length
+        if start != expected_from or stop - start != length or length <= 0:
+            raise _fail(where, f"episode {ep}: index range [{start}, {stop}) length {length} is not contiguous")
+        expected_from = stop
+    if expected_from != info["total_frames"]:
+        raise _fail(where, f"episodes cover {expected_from} frames, info.total_frames={info['total_frames']}")
+    video_keys = [k for k, f in info["features"].items() if f["dtype"] == "video"]
+    for key in video_keys:
+        frm = episodes[f"videos/{key}/from_timestamp"].to_numpy()
+        to = episodes[f"videos/{key}/to_timestamp"].to_numpy()
+        span = (to - frm) * fps
+        bad = np.flatnonzero(np.abs(span - episodes["length"].to_numpy()) > 1e-3)
+        if bad.size:
+            ep = int(episodes["episode_index"].iloc[bad[0]])
+            raise _fail(where, f"episode {ep}: videos/{key} spans {span[bad[0]]:.4f} frames, length is "
+                        f"{int(episodes['length'].iloc[bad[0]])}")
+
+
+def _check_data(root: Path, info: dict[str, Any], episodes: pd.DataFrame) -> None:
+    fps = int(info["fps"])
+    columns = [k for k, f in info["features"].items() if f["dtype"] not in ("video", "image")]
+    for (chunk, file), group in episodes.groupby(["data/chunk_index", "data/file_index"], sort=True):
+        path = root / info["data_path"].format(chunk_index=chunk, file_index=file)
+        if not path.is_file():
+            raise _fail(path, f"missing (referenced by episodes {list(group['episode_index'])})")
+        table = pq.read_table(path)
+        extra = set(table.column_names) - set(columns)
+        absent = set(columns) - set(table.column_names)
+        if extra or absent:
+            raise _fail(path, f"columns differ from info.features: undeclared {sorted(extra)}, missing {sorted(absent)}")
+        ep_col = table.column("episode_index").to_numpy()
+        for row in group.itertuples(index=False):
+            mask = ep_col == row.episode_index
+            frames = table.filter(mask)
+            n = frames.num_rows
+            if n != row.length:
+                raise _fail(path, f"episode {row.episode_index} has {n} rows, meta says {row.length}")
+            frame_index = frames.column("frame_index").to_numpy()
+            if not np.array_equal(frame_index, np.arange(n)):
+                raise _fail(path, f"episode {row.episode_index}: frame_index is not 0..{n - 1}")
+            index = frames.column("index").to_numpy()
+            if not np.array_equal(index, np.arange(row.dataset_from_index, row.dataset_to_index)):
+                raise _fail(path, f"episode {row.episode_index}: index is not {row.dataset_from_index}..")
+            ts = frames.column("timestamp").to_numpy()
+            expected = (np.arange(n) / fps).astype(np.float32)
+            if not np.allclose(ts, expected, atol=_TIME_TOL_S, rtol=0):
+                k = int(np.argmax(np.abs(ts - expected)))
+                raise _fail(path, f"episode {row.episode_index} frame {k}: timestamp {ts[k]} != {k}/{fps}")
+            tasks = frames.column("task_index").to_numpy()
+            if tasks.min() < 0 or tasks.max() >= info["total_tasks"]:
+                raise _fail(path, f"episode {row.episode_index}: task_index outside 0..{info['total_tasks'] - 1}")
+
+
+def _check_videos(root: Path, info: dict[str, Any], episodes: pd.DataFrame) -> None:
+    fps = int(info["fps"])
+    for key, feature in info["features"].items():
+        if feature["dtype"] != "video":
+            continue
+        cols = [f"videos/{key}/chunk_index", f"videos/{key}/file_index"]
+        for (chunk, file), group in episodes.groupby(cols, sort=True):
+            path = root / info["video_path"].format(video_key=key, chunk_index=chunk, file_index=file)
+            if not path.is_file():
+                raise _fail(path, f"missing (referenced by episodes {list(group['episode_index'])})")
+            probed = probe_video(path)
+            vinfo = feature.get("info", {})
+            if (probed.height, probed.width) != (vinfo.get("video.height"), vinfo.get("video.width")):
+                raise _fail(path, f"is {probed.width}x{probed.height}, info says "
+                            f"{vinfo.get('video.width')}x{vinfo.get('video.height')}")
+            if probed.codec != vinfo.get("video.codec"):
+                raise _fail(path, f"codec {probed.codec!r}, info says {vinfo.get('video.codec')!r}")
+            last_to = float(group[f"videos/{key}/to_timestamp"].max())
+            if abs(probed.frames / fps - last_to) > _TIME_TOL_S and probed.frames < round(last_to * fps):
+                raise _fail(path, f"has {probed.frames} frames, episodes need {round(last_to * fps)}")
+
+
+def _check_stats(root: Path, info: dict[str, Any]) -> None:
+    path = root / STATS_PATH
+    if not path.is_file():
+        raise _fail(path, "missing")
+    stats = json.loads(path.read_text())
+    for key, feature in info["features"].items():
+        if key not in stats:
+            raise _fail(path, f"no stats for feature {key!r}")
+        for stat in STAT_KEYS:
+            if stat not in stats[key]:
+                raise _fail(path, f"{key}: missing {stat!r}")
+            value = np.asarray(stats[key][stat])
+            if not np.all(np.isfinite(value)):
+                raise _fail(path, f"{key}/{stat} is not finite")
+            if stat == "count":
+                continue
+            if feature["dtype"] == "video" and value.shape != (3, 1, 1):
+                raise _fail(path, f"{key}/{stat} has shape {value.shape}, expected (3, 1, 1)")
+            if feature["dtype"] != "video" and value.shape != tuple(feature["shape"]):
+                raise _fail(path, f"{key}/{stat} has shape {value.shape}, feature shape is {feature['shape']}")
+
+
+def check_invariants(root: Path) -> dict[str, Any]:
+    """Raise on the first violated invariant; returns info.json on success."""
+    info = _load_info(root)
+    tasks_path = root / TASKS_PATH
+    if not tasks_path.is_file():
+        raise _fail(tasks_path, "missing")
+    tasks = pd.read_parquet(tasks_path)
+    if list(tasks["task_index"]) != list(range(len(tasks))) or len(tasks) != info["total_tasks"]:
+        raise _fail(tasks_path, f"task_index must be 0..{info['total_tasks'] - 1}")
+    episode_files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
+    if not episode_files:
+        raise _fail(root / "meta/episodes", "no episodes parquet")
+    episodes = pd.concat([pd.read_parquet(p) for p in episode_files], ignore_index=True)
+    _check_episode_rows(root, info, episodes)
+    _check_data(root, info, episodes)
+    _check_videos(root, info, episodes)
+    _check_stats(root, info)
+    return info

@@ -1,0 +1,170 @@
+"""``meta/``: info.json, tasks.parquet, episodes parquet and stats.json."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import pyarrow as pa
+import pyarrow.parquet as pq
+from fsspec.core import url_to_fs
+
+from bagport.dataset.data_files import DataPlacement
+from bagport.dataset.layout import (
+    CODEBASE_VERSION,
+    DATA_PATH,
+    DEFAULT_FEATURES,
+    EPISODES_PATH,
+    INFO_PATH,
+    STATS_PATH,
+    TASKS_PATH,
+    VIDEO_PATH,
+)
+from bagport.dataset.videos import VideoPlacement
+from bagport.staging import STATS_FILE, EpisodeSummary, StagedFeature
+from bagport.stats import (
+    FeatureStats,
+    merge_feature_stats,
+    merge_histograms,
+    stats_from_json,
+    vector_stats,
+)
+
+__all__ = ["DatasetLimits", "EpisodeStats", "build_info", "load_episode_stats", "write_meta"]
+
+
+@dataclass(frozen=True, slots=True)
+class DatasetLimits:
+    chunks_size: int = 1000
+    data_files_size_in_mb: int = 100
+    video_files_size_in_mb: int = 200
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeStats:
+    stats: dict[str, FeatureStats]
+    histograms: dict[str, np.ndarray]
+
+
+def load_episode_stats(
+    summary: EpisodeSummary, episode_index: int, placement: DataPlacement, task_indices: np.ndarray
+) -> EpisodeStats:
+    fs, path = url_to_fs(summary.file(STATS_FILE))
+    with fs.open(path, "r") as handle:
+        raw: dict[str, dict[str, Any]] = json.load(handle)
+    stats: dict[str, FeatureStats] = {}
+    histograms: dict[str, np.ndarray] = {}
+    for key, values in raw.items():
+        hist = values.pop("histogram", None)
+        if hist is not None:
+            histograms[key] = np.asarray(hist, dtype=np.int64)
+        stats[key] = stats_from_json(values)
+    frames = summary.frames
+    frame_index = np.arange(frames, dtype=np.int64)
+    stats["timestamp"] = vector_stats((frame_index / summary.fps).astype(np.float32))
+    stats["frame_index"] = vector_stats(frame_index)
+    stats["episode_index"] = vector_stats(np.full(frames, episode_index))
+    stats["index"] = vector_stats(np.arange(placement.from_index, placement.to_index))
+    stats["task_index"] = vector_stats(task_indices)
+    return EpisodeStats(stats, histograms)
+
+
+def build_info(
+    features: Sequence[StagedFeature],
+    *,
+    robot_type: str,
+    fps: int,
+    total_episodes: int,
+    total_frames: int,
+    total_tasks: int,
+    limits: DatasetLimits,
+) -> dict[str, Any]:
+    feature_dict: dict[str, Any] = {}
+    for f in features:
+        entry: dict[str, Any] = {"dtype": f.dtype, "shape": list(f.shape), "names": list(f.names) if f.names else None}
+        if f.video_info is not None:
+            entry["info"] = f.video_info
+        feature_dict[f.key] = entry
+    feature_dict.update({k: dict(v) for k, v in DEFAULT_FEATURES.items()})
+    has_video = any(f.video_info is not None for f in features)
+    return {
+        "codebase_version": CODEBASE_VERSION,
+        "robot_type": robot_type,
+        "fps": fps,
+        "features": feature_dict,
+        "total_episodes": total_episodes,
+        "total_frames": total_frames,
+        "total_tasks": total_tasks,
+        "chunks_size": limits.chunks_size,
+        "data_files_size_in_mb": limits.data_files_size_in_mb,
+        "video_files_size_in_mb": limits.video_files_size_in_mb,
+        "data_path": DATA_PATH,
+        "video_path": VIDEO_PATH if has_video else None,
+        "splits": {"train": f"0:{total_episodes}"},
+    }
+
+
+def _stat_columns(stats: dict[str, FeatureStats], keys: Sequence[str]) -> dict[str, Any]:
+    row: dict[str, Any] = {}
+    for key in keys:
+        for stat, value in stats[key].items():
+            row[f"stats/{key}/{stat}"] = np.asarray(value).tolist()
+    return row
+
+
+def write_meta(
+    root: Path,
+    summaries: Sequence[EpisodeSummary],
+    features: Sequence[StagedFeature],
+    tasks: Sequence[str],
+    data: Sequence[DataPlacement],
+    videos: dict[str, list[VideoPlacement]],
+    episode_stats: Sequence[EpisodeStats],
+    info: dict[str, Any],
+) -> None:
+    (root / "meta").mkdir(parents=True, exist_ok=True)
+    (root / INFO_PATH).write_text(json.dumps(info, indent=4))
+    task_frame = pd.DataFrame({"task_index": np.arange(len(tasks), dtype=np.int64)}, index=pd.Index(tasks, name="task"))
+    task_frame.to_parquet(root / TASKS_PATH)
+
+    stat_keys = [f.key for f in features] + list(DEFAULT_FEATURES)
+    rows = []
+    for episode_index, (summary, placement, ep_stats) in enumerate(zip(summaries, data, episode_stats, strict=True)):
+        row: dict[str, Any] = {
+            "episode_index": episode_index,
+            "tasks": list(summary.tasks),
+            "length": summary.frames,
+            "data/chunk_index": placement.chunk_index,
+            "data/file_index": placement.file_index,
+            "dataset_from_index": placement.from_index,
+            "dataset_to_index": placement.to_index,
+        }
+        for key, placed in videos.items():
+            video = placed[episode_index]
+            row[f"videos/{key}/chunk_index"] = video.chunk_index
+            row[f"videos/{key}/file_index"] = video.file_index
+            row[f"videos/{key}/from_timestamp"] = video.from_timestamp_s
+            row[f"videos/{key}/to_timestamp"] = video.to_timestamp_s
+        row.update(_stat_columns(ep_stats.stats, stat_keys))
+        row["meta/episodes/chunk_index"] = 0
+        row["meta/episodes/file_index"] = 0
+        rows.append(row)
+    episodes_path = root / EPISODES_PATH.format(chunk_index=0, file_index=0)
+    episodes_path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(pa.Table.from_pylist(rows), episodes_path)
+
+    merged: dict[str, Any] = {}
+    for key in stat_keys:
+        parts = [ep.stats[key] for ep in episode_stats]
+        if all(key in ep.histograms for ep in episode_stats):
+            hists = [ep.histograms[key] for ep in episode_stats]
+            value = merge_histograms(hists, [int(p["count"][0]) for p in parts])
+        else:
+            value = merge_feature_stats(parts)
+        merged[key] = {stat: np.asarray(v).tolist() for stat, v in value.items()}
+    (root / STATS_PATH).write_text(json.dumps(merged, indent=4))

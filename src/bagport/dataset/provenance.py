@@ -1,0 +1,68 @@
+"""The dataset's provenance log: every frame traced to its bag, topic and times.
+
+``meta/provenance/chunk-000/file-000.parquet`` has one row per frame and contract
+source (``episode_index, index, frame_index, key, topic, tick_ns, source_log_ns,
+source_header_ns, stamp_used, message_index``); ``meta/provenance/run.json``
+records the run: contract and manifest snapshots, bag URIs and fingerprints,
+grid start/end per episode, bagport version and encoder settings.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from fsspec.core import url_to_fs
+
+from bagport.dataset.data_files import DataPlacement
+from bagport.dataset.layout import PROVENANCE_PATH, RUN_RECORD_PATH
+from bagport.staging import PROVENANCE_FILE, EpisodeSummary
+
+__all__ = ["write_provenance"]
+
+
+def write_provenance(
+    root: Path, summaries: Sequence[EpisodeSummary], data: Sequence[DataPlacement], run_record: dict[str, Any]
+) -> None:
+    path = root / PROVENANCE_PATH.format(chunk_index=0, file_index=0)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer: pq.ParquetWriter | None = None
+    try:
+        for episode_index, (summary, placement) in enumerate(zip(summaries, data, strict=True)):
+            fs, staged = url_to_fs(summary.file(PROVENANCE_FILE))
+            with fs.open(staged, "rb") as handle:
+                table = pq.read_table(handle)
+            frame_index = table.column("frame_index").to_numpy()
+            table = table.add_column(0, "index", pa.array(placement.from_index + frame_index.astype(np.int64)))
+            table = table.add_column(0, "episode_index", pa.array(np.full(table.num_rows, episode_index, np.int64)))
+            if writer is None:
+                writer = pq.ParquetWriter(path, table.schema, compression="zstd")
+            writer.write_table(table)
+    finally:
+        if writer is not None:
+            writer.close()
+    episodes = [
+        {
+            "episode_index": i,
+            "bag_uri": s.bag_uri,
+            "storage": s.storage,
+            "bag_size_bytes": s.bag_size_bytes,
+            "bag_fingerprint": s.bag_fingerprint,
+            "manifest_entry": s.manifest_entry,
+            "staged_episode_id": s.episode_id,
+            "frames": s.frames,
+            "first_tick_ns": s.first_tick_ns,
+            "last_tick_ns": s.last_tick_ns,
+            "task_source": s.task_source,
+            "stamp_sources": s.stamp_sources,
+            "metadata": s.metadata,
+        }
+        for i, s in enumerate(summaries)
+    ]
+    record = {**run_record, "episodes": episodes}
+    (root / RUN_RECORD_PATH).write_text(json.dumps(record, indent=2, default=str))

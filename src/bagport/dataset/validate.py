@@ -1,0 +1,83 @@
+"""``bagport validate``: the invariants, then the real consumer (LeRobot) decodes every frame."""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from bagport.dataset.invariants import check_invariants
+from bagport.errors import ValidationError
+
+__all__ = ["ValidationReport", "validate_dataset"]
+
+
+@dataclass(frozen=True, slots=True)
+class ValidationReport:
+    root: str
+    episodes: int
+    frames: int
+    frames_decoded: int
+    video_keys: tuple[str, ...]
+    video_backend: str
+
+
+def validate_dataset(
+    root: str | Path,
+    *,
+    repo_id: str | None = None,
+    decode_every: int = 1,
+    progress: Callable[[int, int], None] | None = None,
+) -> ValidationReport:
+    """Check invariants, load with ``lerobot.LeRobotDataset`` offline, decode frames.
+
+    ``decode_every=1`` decodes every frame of every episode (the default); a larger
+    value samples every n-th frame plus each episode's last frame.
+    """
+    path = Path(root)
+    info = check_invariants(path)
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    try:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - optional, heavy
+    except ImportError as err:
+        raise ValidationError(
+            "the lerobot package is not installed, so the dataset cannot be loaded by LeRobot. "
+            "Fix: install bagport with the 'lerobot' extra (the README's set-up command does)."
+        ) from err
+    try:
+        dataset = LeRobotDataset(repo_id or f"local/{path.name}", root=path)
+    except Exception as err:
+        raise ValidationError(f"{path}: LeRobotDataset failed to load it: {type(err).__name__}: {err}") from err
+    total = len(dataset)
+    if total != info["total_frames"]:
+        raise ValidationError(f"{path}: LeRobot sees {total} frames, info.json says {info['total_frames']}")
+    video_keys = tuple(dataset.meta.video_keys)
+    indices = _indices(dataset, decode_every)
+    for n, index in enumerate(indices):
+        try:
+            item = dataset[index]
+        except Exception as err:
+            raise ValidationError(
+                f"{path}: LeRobot failed to read frame index={index}: {type(err).__name__}: {err}"
+            ) from err
+        for key in video_keys:
+            frame = item[key]
+            if tuple(frame.shape[-2:]) != tuple(info["features"][key]["shape"][:2]):
+                raise ValidationError(f"{path}: frame {index} of {key} decoded with shape {tuple(frame.shape)}")
+        if progress is not None:
+            progress(n + 1, len(indices))
+    return ValidationReport(
+        str(path), dataset.meta.total_episodes, total, len(indices), video_keys, str(dataset._video_backend)
+    )
+
+
+def _indices(dataset: object, every: int) -> list[int]:
+    total = len(dataset)  # type: ignore[arg-type]
+    if every <= 1:
+        return list(range(total))
+    meta = dataset.meta  # type: ignore[attr-defined]
+    picked: set[int] = set(range(0, total, every))
+    for ep in range(meta.total_episodes):
+        picked.add(int(meta.episodes[ep]["dataset_to_index"]) - 1)
+    return sorted(picked)

@@ -1,0 +1,165 @@
+"""The reduce step: staged episodes in, one LeRobot v3.0 dataset out, published atomically."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+import uuid
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow.parquet as pq
+from fsspec.core import url_to_fs
+
+from bagport.dataset.data_files import write_data_files
+from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
+from bagport.dataset.provenance import write_provenance
+from bagport.dataset.videos import write_video_files
+from bagport.errors import DatasetWriteError
+from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
+
+__all__ = ["DatasetReport", "write_dataset"]
+
+
+@dataclass(frozen=True, slots=True)
+class DatasetReport:
+    root: str
+    episodes: int
+    frames: int
+    tasks: tuple[str, ...]
+    video_keys: tuple[str, ...]
+    size_bytes: int
+    duration_s: float
+
+
+def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeature, ...]:
+    if not summaries:
+        raise DatasetWriteError("no episode to write: every bag failed or the manifest is empty.")
+    reference = summaries[0]
+    for summary in summaries[1:]:
+        if summary.fps != reference.fps:
+            raise DatasetWriteError(f"{summary.bag_uri} was converted at {summary.fps} fps, {reference.bag_uri} at {reference.fps}")
+        mine = {f.key: f for f in summary.features}
+        for feature in reference.features:
+            other = mine.get(feature.key)
+            if other is None:
+                raise DatasetWriteError(f"{summary.bag_uri} has no feature {feature.key!r} but {reference.bag_uri} has")
+            if (other.dtype, other.shape, other.names) != (feature.dtype, feature.shape, feature.names):
+                raise DatasetWriteError(
+                    f"feature {feature.key!r} differs between bags: {reference.bag_uri} gives "
+                    f"{feature.dtype}{list(feature.shape)} names={feature.names}, {summary.bag_uri} gives "
+                    f"{other.dtype}{list(other.shape)} names={other.names}. Fix: select the same joints/fields "
+                    "explicitly with selector.names, and set image.resize so every camera has one size."
+                )
+            if feature.video_info != other.video_info:
+                raise DatasetWriteError(
+                    f"video {feature.key!r} was encoded differently in {summary.bag_uri} and {reference.bag_uri} "
+                    f"({other.video_info} vs {feature.video_info}); clips can only be joined with identical settings."
+                )
+    return reference.features
+
+
+def _task_indices(summary: EpisodeSummary, task_index: dict[str, int]) -> np.ndarray:
+    fs, path = url_to_fs(summary.file(FRAMES_FILE))
+    with fs.open(path, "rb") as handle:
+        tasks = pq.read_table(handle, columns=["task"]).column("task").to_pylist()
+    return np.array([task_index[t] for t in tasks], dtype=np.int64)
+
+
+def _build(root: Path, summaries: Sequence[EpisodeSummary], robot_type: str, limits: DatasetLimits, run_record: dict[str, Any]) -> DatasetReport:
+    features = _check_consistent(summaries)
+    fps = summaries[0].fps
+    tasks = list(dict.fromkeys(t for s in summaries for t in s.tasks))
+    task_index = {t: i for i, t in enumerate(tasks)}
+    vectors = [f for f in features if f.video_info is None]
+    video_keys = [f.key for f in features if f.video_info is not None]
+    data = write_data_files(
+        root, summaries, vectors, task_index, file_size_in_mb=limits.data_files_size_in_mb, chunks_size=limits.chunks_size
+    )
+    videos = {
+        key: write_video_files(
+            root, key, summaries, fps=fps, file_size_in_mb=limits.video_files_size_in_mb, chunks_size=limits.chunks_size
+        )
+        for key in video_keys
+    }
+    episode_stats = [
+        load_episode_stats(s, i, data[i], _task_indices(s, task_index)) for i, s in enumerate(summaries)
+    ]
+    total_frames = sum(s.frames for s in summaries)
+    info = build_info(
+        features,
+        robot_type=robot_type,
+        fps=fps,
+        total_episodes=len(summaries),
+        total_frames=total_frames,
+        total_tasks=len(tasks),
+        limits=limits,
+    )
+    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info)
+    write_provenance(root, summaries, data, run_record)
+    size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+    return DatasetReport(str(root), len(summaries), total_frames, tuple(tasks), tuple(video_keys), size, total_frames / fps)
+
+
+def write_dataset(
+    summaries: Sequence[EpisodeSummary],
+    output: str,
+    *,
+    robot_type: str,
+    limits: DatasetLimits | None = None,
+    run_record: dict[str, Any] | None = None,
+    overwrite: bool = False,
+) -> DatasetReport:
+    """Write the dataset at ``output`` (the dataset root).
+
+    Everything is built in a temporary folder beside ``output`` and renamed into
+    place at the end, so a reader never sees a half-written dataset and a failure
+    leaves whatever was at ``output`` untouched.
+    """
+    limits = limits or DatasetLimits()
+    fs, out_path = url_to_fs(output)
+    local = "file" in (fs.protocol if isinstance(fs.protocol, tuple) else (fs.protocol,))
+    if fs.exists(out_path) and not overwrite:
+        raise DatasetWriteError(
+            f"{output} already exists; nothing was written. Fix: choose a new --output, or pass --overwrite "
+            "to replace it (the old dataset is kept until the new one is complete)."
+        )
+    if local:
+        final = Path(out_path)
+        final.parent.mkdir(parents=True, exist_ok=True)
+        build_root = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex[:8]}"
+    else:
+        build_root = Path(tempfile.mkdtemp(prefix="bagport-dataset-")) / "dataset"
+    build_root.mkdir(parents=True)
+    try:
+        report = _build(build_root, summaries, robot_type, limits, run_record or {})
+        if local:
+            _swap_into_place(build_root, final)
+        else:
+            if fs.exists(out_path):
+                fs.rm(out_path, recursive=True)
+            fs.put(str(build_root), out_path, recursive=True)
+    except BaseException:
+        shutil.rmtree(build_root, ignore_errors=True)
+        raise
+    finally:
+        if not local:
+            shutil.rmtree(build_root.parent, ignore_errors=True)
+    return DatasetReport(output, report.episodes, report.frames, report.tasks, report.video_keys, report.size_bytes, report.duration_s)
+
+
+def _swap_into_place(build_root: Path, final: Path) -> None:
+    if not final.exists():
+        build_root.rename(final)
+        return
+    retired = final.parent / f".{final.name}.old-{uuid.uuid4().hex[:8]}"
+    final.rename(retired)
+    try:
+        build_root.rename(final)
+    except OSError:
+        retired.rename(final)
+        raise
+    shutil.rmtree(retired, ignore_errors=True)

@@ -1,0 +1,9 @@
+"""Message decoders: numeric vectors, images, and user-supplied decoders."""
+
+from __future__ import annotations
+
+from bagport.decode.custom import CustomDecoder, resolve_decoder
+from bagport.decode.image import decode_image, resize_rgb
+from bagport.decode.vector import VectorExtractor, make_extractor
+
+__all__ = ["CustomDecoder", "VectorExtractor", "decode_image", "make_extractor", "resize_rgb", "resolve_decoder"]

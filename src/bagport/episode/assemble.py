@@ -1,0 +1,140 @@
+"""Pass 2: stream the bag once and emit aligned frames in order.
+
+Which message feeds which tick is decided beforehand from the timeline (pure
+index arrays).  While streaming, only the selected messages are deserialised and
+decoded, kept until the last tick that uses them, then dropped: memory is bounded
+by the arrival skew between topics, not by episode length.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from bagport.bags import BagMessage, BagReader
+from bagport.contract.plan import FeatureKind, FeatureSpec, SourceSpec
+from bagport.decode import VectorExtractor, decode_image, make_extractor, resize_rgb
+from bagport.episode.timeline import TopicTimeline
+from bagport.errors import AlignmentError, DecodeError
+
+__all__ = ["AlignedSource", "Frame", "assemble_frames"]
+
+Int64Array = npt.NDArray[np.int64]
+
+
+@dataclass(slots=True)
+class AlignedSource:
+    """One contract source with its per-tick message selection."""
+
+    src: SourceSpec
+    kind: FeatureKind
+    timeline: TopicTimeline
+    stamp_used: str
+    selection: Int64Array
+    extractor: VectorExtractor | None = None
+    cache: dict[int, Any] = field(default_factory=dict)
+    last_use: dict[int, int] = field(default_factory=dict)
+    needed: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
+
+    def prepare(self) -> None:
+        self.needed = np.zeros(self.timeline.count, dtype=np.bool_)
+        self.needed[self.selection] = True
+        self.last_use = {int(i): k for k, i in enumerate(self.selection)}
+
+
+@dataclass(frozen=True, slots=True)
+class Frame:
+    index: int
+    tick_ns: int
+    vectors: dict[str, npt.NDArray[np.float64]]
+    images: dict[str, npt.NDArray[np.uint8]]
+    sources: Sequence[tuple[AlignedSource, int]]
+    """Each source with the index (in its topic's log order) of the message used."""
+
+
+def _decode(source: AlignedSource, message: BagMessage) -> Any:
+    msg = message.msg()
+    if source.kind is FeatureKind.VIDEO:
+        rgb = decode_image(msg, source.src.msgtype)
+        if source.src.resize_hw is not None:
+            rgb = resize_rgb(rgb, *source.src.resize_hw)
+        return rgb
+    if source.extractor is None:
+        source.extractor = make_extractor(source.src, msg)
+    return source.extractor(msg)
+
+
+def assemble_frames(
+    reader: BagReader,
+    uri: str,
+    features: Sequence[FeatureSpec],
+    sources: Sequence[AlignedSource],
+    ticks_ns: Int64Array,
+    on_frame: Callable[[Frame], None],
+) -> int:
+    """Stream ``reader`` and call ``on_frame`` for every tick, in order; returns frames emitted."""
+    by_topic: dict[str, list[AlignedSource]] = {}
+    for source in sources:
+        source.prepare()
+        by_topic.setdefault(source.src.topic, []).append(source)
+    arrived = dict.fromkeys(by_topic, 0)
+    total = int(ticks_ns.size)
+    next_tick = 0
+    by_key = {f.key: [s for s in sources if s.src.key == f.key] for f in features}
+    for message in reader.messages(tuple(by_topic)):
+        index = arrived[message.topic]
+        arrived[message.topic] = index + 1
+        wanted = False
+        for source in by_topic[message.topic]:
+            if index < source.needed.size and source.needed[index]:
+                wanted = True
+                try:
+                    source.cache[index] = _decode(source, message)
+                except DecodeError as err:
+                    raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
+        if not wanted:
+            continue
+        while next_tick < total and all(arrived[s.src.topic] > s.selection[next_tick] for s in sources):
+            on_frame(_frame(next_tick, int(ticks_ns[next_tick]), features, by_key, uri))
+            _release(sources, next_tick)
+            next_tick += 1
+        if next_tick == total:
+            break
+    if next_tick < total:
+        raise AlignmentError(
+            f"the bag ended after {next_tick} of {total} frames: messages seen in the first pass were missing "
+            "in the second",
+            uri=uri,
+            fix="the bag changed while it was read, or it is corrupt; re-run, or reindex the bag.",
+        )
+    return total
+
+
+def _frame(
+    k: int, tick_ns: int, features: Sequence[FeatureSpec], by_key: dict[str, list[AlignedSource]], uri: str
+) -> Frame:
+    vectors: dict[str, npt.NDArray[np.float64]] = {}
+    images: dict[str, npt.NDArray[np.uint8]] = {}
+    used: list[tuple[AlignedSource, int]] = []
+    for feature in features:
+        parts = []
+        for source in by_key[feature.key]:
+            index = int(source.selection[k])
+            used.append((source, index))
+            parts.append(source.cache[index])
+        if feature.kind is FeatureKind.VIDEO:
+            images[feature.key] = parts[0]
+        else:
+            vectors[feature.key] = parts[0] if len(parts) == 1 else np.concatenate(parts)
+    return Frame(k, tick_ns, vectors, images, used)
+
+
+def _release(sources: Sequence[AlignedSource], k: int) -> None:
+    for source in sources:
+        index = int(source.selection[k])
+        if source.last_use.get(index) == k:
+            source.cache.pop(index, None)

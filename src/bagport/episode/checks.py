@@ -1,0 +1,57 @@
+"""Checks of a bag against a contract, before any work starts."""
+
+from __future__ import annotations
+
+import hashlib
+
+from bagport.bags import BagInfo
+from bagport.contract import ContractPlan, normalize_msgtype
+from bagport.errors import AlignmentError, ContractError
+
+__all__ = ["bag_fingerprint", "check_bag_fits"]
+
+
+def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
+    """Every contract topic exists in the bag, has messages, and has the declared type."""
+    available = {t.name: t for t in info.topics}
+    wanted = [(s.topic, s.msgtype, s.key) for s in plan.sources]
+    wanted += [(t.topic, t.type, t.key) for t in plan.task_topics]
+    for topic, msgtype, key in wanted:
+        found = available.get(topic)
+        if found is None:
+            listing = ", ".join(f"{t.name} ({t.msgtype})" for t in info.topics) or "none"
+            raise ContractError(
+                f"topic {topic} (for {key!r}) is not in bag {info.uri}; the bag has: {listing}",
+                file=plan.source_name,
+                field=key,
+                fix="fix the topic name in the contract, or remove this bag from the manifest.",
+            )
+        if normalize_msgtype(found.msgtype) != msgtype:
+            raise ContractError(
+                f"topic {topic} in bag {info.uri} has type {found.msgtype}, the contract says {msgtype}",
+                file=plan.source_name,
+                field=f"{key}.type",
+                fix=f"set 'type: {found.msgtype}' for this entry, or map the right topic.",
+            )
+    for source in plan.sources:
+        if available[source.topic].count == 0:
+            raise AlignmentError(
+                f"topic {source.topic} (for {source.key!r}) has no messages",
+                uri=info.uri,
+                fix="record the topic, or drop this bag from the manifest.",
+            )
+
+
+def bag_fingerprint(info: BagInfo) -> str:
+    """A cheap fingerprint from the bag's index: files, sizes, counts and time range.
+
+    It changes when a bag is re-recorded, re-split or truncated; it does not hash
+    the payload bytes (that would cost a full read of multi-GB files).
+    """
+    digest = hashlib.sha256()
+    parts = [info.storage, *info.files, str(info.size_bytes), str(info.start_ns), str(info.end_ns)]
+    parts += [f"{t.name}:{t.msgtype}:{t.count}" for t in sorted(info.topics, key=lambda t: t.name)]
+    for part in parts:
+        digest.update(part.encode())
+        digest.update(b"\0")
+    return "sha256-index:" + digest.hexdigest()[:32]

@@ -1,0 +1,251 @@
+"""Convert one bag into a staged episode artifact (see :mod:`bagport.staging`)."""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pyarrow.parquet as pq
+from fsspec.core import url_to_fs
+
+from bagport import __version__
+from bagport.align import grid_ticks_ns, select_for_ticks
+from bagport.bags import open_bag
+from bagport.contract import ContractPlan, FeatureKind, parse_contract
+from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
+from bagport.episode.checks import bag_fingerprint, check_bag_fits
+from bagport.episode.request import EpisodeRequest
+from bagport.episode.sinks import FrameTableWriter, ProvenanceWriter
+from bagport.episode.tasks import resolve_tasks
+from bagport.episode.timeline import Timeline, scan_timeline
+from bagport.errors import AlignmentError, DecodeError
+from bagport.staging import (
+    EPISODE_SUMMARY,
+    FRAMES_FILE,
+    PROVENANCE_FILE,
+    STATS_FILE,
+    EpisodeSummary,
+    StagedFeature,
+    episode_dir,
+    staged_path,
+    write_json,
+)
+from bagport.stats import ImageStatsAccumulator, stats_to_json, vector_stats
+from bagport.video import EncoderSettings, StreamingEncoder
+
+__all__ = ["convert_episode"]
+
+
+def _align(plan: ContractPlan, timeline: Timeline, uri: str) -> tuple[list[AlignedSource], np.ndarray]:
+    chosen: list[tuple[Any, str]] = []
+    for feature in plan.features:
+        for src in feature.sources:
+            topic = timeline.topics[src.topic]
+            stamp = src.stamp or ("header" if topic.header_ns is not None else "receive")
+            if stamp == "header" and topic.header_ns is None:
+                raise AlignmentError(
+                    f"align.stamp is 'header' for {src.key!r} but {src.topic} has no header stamps "
+                    "(type without header, or stamps left at zero)",
+                    uri=uri,
+                    topic=src.topic,
+                    fix="set 'align: {stamp: receive}' for this entry.",
+                )
+            chosen.append(((feature, src, topic), stamp))
+    firsts = [(t.stamps(s).min(), t.topic) for (_, _, t), s in chosen]
+    lasts = [(t.stamps(s).max(), t.topic) for (_, _, t), s in chosen]
+    start_ns, start_topic = max(firsts)
+    end_ns, end_topic = min(lasts)
+    if end_ns < start_ns:
+        ranges = "; ".join(
+            f"{t.topic}: {int(t.stamps(s).min())}..{int(t.stamps(s).max())} ns" for (_, _, t), s in chosen
+        )
+        raise AlignmentError(
+            f"the streams never overlap in time ({start_topic} starts after {end_topic} ends): {ranges}",
+            uri=uri,
+            fix="check the topics and the stamp source (header vs receive) in the contract.",
+        )
+    ticks = grid_ticks_ns(int(start_ns), int(end_ns), plan.fps)
+    sources = []
+    for (feature, src, topic), stamp in chosen:
+        selection = select_for_ticks(
+            topic.stamps(stamp), ticks, strategy=src.strategy, fps=plan.fps, tol_ms=src.tol_ms
+        )
+        missing = np.flatnonzero(selection < 0)
+        if missing.size:
+            first = int(ticks[missing[0]])
+            raise AlignmentError(
+                f"{missing.size} of {ticks.size} frames have no {src.key!r} message under align.strategy "
+                f"{src.strategy!r} (first at t_ns={first}, {(first - ticks[0]) / 1e9:.3f} s into the episode)",
+                uri=uri,
+                topic=src.topic,
+                fix="raise align.tol_ms, or use 'strategy: hold'; bagport never fills missing values silently.",
+            )
+        sources.append(AlignedSource(src, feature.kind, topic, stamp, selection))
+    return sources, ticks
+
+
+@dataclass
+class _EpisodeSinks:
+    workdir: Path
+    plan: ContractPlan
+    settings: EncoderSettings
+    frame_tasks: list[str]
+
+    def __post_init__(self) -> None:
+        vector_dtypes = {f.key: f.dtype for f in self.plan.features if f.kind is FeatureKind.VECTOR}
+        (self.workdir / "videos").mkdir(parents=True, exist_ok=True)
+        self.frames = FrameTableWriter(self.workdir / FRAMES_FILE, self.plan.fps, vector_dtypes)
+        self.provenance = ProvenanceWriter(self.workdir / PROVENANCE_FILE)
+        self.encoders: dict[str, StreamingEncoder] = {}
+        self.image_stats: dict[str, ImageStatsAccumulator] = {}
+        self.widths: dict[str, int] = {}
+
+    def on_frame(self, frame: Frame) -> None:
+        for key, rgb in frame.images.items():
+            encoder = self.encoders.get(key)
+            if encoder is None:
+                encoder = StreamingEncoder(
+                    self.workdir / "videos" / f"{key}.mp4",
+                    fps=self.plan.fps,
+                    width=rgb.shape[1],
+                    height=rgb.shape[0],
+                    settings=self.settings,
+                )
+                self.encoders[key] = encoder
+                self.image_stats[key] = ImageStatsAccumulator()
+            encoder.write(rgb)
+            self.image_stats[key].update(rgb)
+        for key, vec in frame.vectors.items():
+            width = self.widths.setdefault(key, vec.shape[0])
+            if vec.shape[0] != width:
+                raise DecodeError(
+                    f"{key!r} has {vec.shape[0]} values at frame {frame.index}, {width} before",
+                    t_ns=frame.tick_ns,
+                    fix="select a fixed set of dimensions with selector.names.",
+                )
+        for source, index in frame.sources:
+            header = source.timeline.header_ns
+            self.provenance.add(
+                frame.index,
+                source.src.key,
+                source.src.topic,
+                frame.tick_ns,
+                int(source.timeline.log_ns[index]),
+                int(header[index]) if header is not None else None,
+                source.stamp_used,
+                index,
+            )
+        self.frames.add(frame.index, self.frame_tasks[frame.index], frame.vectors)
+
+    def close(self) -> dict[str, Any]:
+        """Close every writer; returns video clip infos by key."""
+        self.frames.close()
+        self.provenance.close()
+        return {key: enc.close() for key, enc in self.encoders.items()}
+
+
+def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
+    """Read one bag, align it to the fps grid, encode videos, and stage the result.
+
+    Raises a :class:`bagport.errors.BagportError` subclass naming the bag, topic
+    and time of any problem; on error nothing is left in the staging store.
+    """
+    plan = parse_contract(request.contract_text, request.contract_name)
+    settings = EncoderSettings.from_dict(request.encoder)
+    with open_bag(request.bag_uri) as reader:
+        info = reader.info
+        check_bag_fits(info, plan)
+        timeline = scan_timeline(reader, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics])
+        sources, ticks = _align(plan, timeline, request.bag_uri)
+        frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
+        workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
+        try:
+            sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks)
+            try:
+                assemble_frames(reader, request.bag_uri, plan.features, sources, ticks, sinks.on_frame)
+            finally:
+                clips = sinks.close()
+            features = _staged_features(plan, sources, sinks, clips, settings)
+            stats: dict[str, Any] = {}
+            table = pq.read_table(workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None])
+            for name in table.column_names:
+                stats[name] = stats_to_json(vector_stats(np.stack(table.column(name).to_numpy(zero_copy_only=False))))
+            for key, acc in sinks.image_stats.items():
+                stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
+            (workdir / STATS_FILE).write_text(json.dumps(stats))
+            target = episode_dir(request.staging_uri, request.episode_id)
+            summary = EpisodeSummary(
+                episode_id=request.episode_id,
+                dir_uri=target,
+                bag_uri=request.bag_uri,
+                storage=str(info.storage),
+                bag_size_bytes=info.size_bytes,
+                bag_fingerprint=bag_fingerprint(info),
+                manifest_entry=request.manifest_entry,
+                fps=plan.fps,
+                frames=int(ticks.size),
+                first_tick_ns=int(ticks[0]),
+                last_tick_ns=int(ticks[-1]),
+                tasks=tuple(dict.fromkeys(frame_tasks)),
+                task_source=task_source,
+                features=features,
+                stamp_sources={f"{s.src.key}@{s.src.topic}": s.stamp_used for s in sources},
+                videos={key: f"videos/{key}.mp4" for key in clips},
+                metadata=dict(request.metadata),
+                bagport_version=__version__,
+                contract_sha256=request.contract_sha256,
+            )
+            _publish(workdir, target, summary)
+        finally:
+            shutil.rmtree(workdir, ignore_errors=True)
+    return summary
+
+
+def _staged_features(
+    plan: ContractPlan,
+    sources: list[AlignedSource],
+    sinks: _EpisodeSinks,
+    clips: dict[str, Any],
+    settings: EncoderSettings,
+) -> tuple[StagedFeature, ...]:
+    out = []
+    for feature in plan.features:
+        mine = [s for s in sources if s.src.key == feature.key]
+        topics = tuple(s.src.topic for s in mine)
+        if feature.kind is FeatureKind.VIDEO:
+            clip = clips[feature.key]
+            video_info = {
+                "video.height": clip.height,
+                "video.width": clip.width,
+                "video.codec": clip.codec,
+                "video.pix_fmt": clip.pix_fmt,
+                "video.fps": plan.fps,
+                "video.channels": 3,
+                "has_audio": False,
+                **settings.to_info(),
+                "is_depth_map": False,
+            }
+            shape = (clip.height, clip.width, 3)
+            out.append(StagedFeature(feature.key, "video", shape, ("height", "width", "channels"), video_info, topics))
+            continue
+        names = tuple(n for s in mine for n in (s.extractor.names if s.extractor else ()))
+        width = sinks.widths[feature.key]
+        out.append(StagedFeature(feature.key, feature.dtype, (width,), names if len(names) == width else None, None, topics))
+    return tuple(out)
+
+
+def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:
+    """Move the finished artifact to the staging store; the summary goes last (completion marker)."""
+    fs, path = url_to_fs(target)
+    if fs.exists(path):
+        fs.rm(path, recursive=True)
+    fs.makedirs(path, exist_ok=True)
+    for item in sorted(workdir.rglob("*")):
+        if item.is_file():
+            fs.put_file(str(item), staged_path(path, item.relative_to(workdir).as_posix()))
+    write_json(staged_path(target, EPISODE_SUMMARY), summary.to_dict())

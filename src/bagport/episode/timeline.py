@@ -1,0 +1,76 @@
+"""Pass 1 over a bag: when did each contract topic publish, by header and by log time.
+
+Only stamps are read (header stamps through the reader's fast path, without
+deserialising payloads), so this pass is cheap next to decoding and encoding.
+Task prompts (small strings) are collected here too.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from dataclasses import dataclass
+
+import numpy as np
+import numpy.typing as npt
+
+from bagport.bags import BagReader
+
+__all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_timeline"]
+
+Int64Array = npt.NDArray[np.int64]
+
+
+@dataclass(frozen=True, slots=True)
+class TopicTimeline:
+    topic: str
+    log_ns: Int64Array
+    header_ns: Int64Array | None
+    """``None`` when the message type has no header or any header stamp is zero."""
+
+    @property
+    def count(self) -> int:
+        return int(self.log_ns.size)
+
+    def stamps(self, source: str) -> Int64Array:
+        if source == "header":
+            if self.header_ns is None:
+                raise ValueError(f"{self.topic} has no usable header stamps")
+            return self.header_ns
+        return self.log_ns
+
+
+@dataclass(frozen=True, slots=True)
+class TaskMessage:
+    stamp_ns: int
+    text: str
+
+
+@dataclass(frozen=True, slots=True)
+class Timeline:
+    topics: dict[str, TopicTimeline]
+    tasks: tuple[TaskMessage, ...]
+
+
+def scan_timeline(reader: BagReader, topics: Iterable[str], task_topics: Iterable[str]) -> Timeline:
+    feature_topics = tuple(topics)
+    task_set = frozenset(task_topics)
+    log: dict[str, list[int]] = {t: [] for t in feature_topics}
+    header: dict[str, list[int | None]] = {t: [] for t in feature_topics}
+    tasks: list[TaskMessage] = []
+    for message in reader.messages(tuple(dict.fromkeys((*feature_topics, *task_set)))):
+        if message.topic in task_set:
+            stamp = message.header_stamp_ns()
+            tasks.append(TaskMessage(stamp if stamp else message.log_time_ns, str(message.msg().data)))
+        if message.topic in log:
+            log[message.topic].append(message.log_time_ns)
+            header[message.topic].append(message.header_stamp_ns())
+    result: dict[str, TopicTimeline] = {}
+    for topic in feature_topics:
+        stamps = header[topic]
+        usable = bool(stamps) and all(s is not None and s > 0 for s in stamps)
+        result[topic] = TopicTimeline(
+            topic=topic,
+            log_ns=np.asarray(log[topic], dtype=np.int64),
+            header_ns=np.asarray(stamps, dtype=np.int64) if usable else None,
+        )
+    return Timeline(topics=result, tasks=tuple(tasks))

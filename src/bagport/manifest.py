@@ -1,0 +1,146 @@
+"""The manifest: which bags to convert, with an optional default task and metadata.
+
+```yaml
+bags:
+  - uri: bags/episode_000          # rosbag2 folder, .mcap, .db3, ROS 1 .bag; local, file:// or s3://
+    task: pick up the red cube     # used when the bag itself carries no task prompt
+    metadata: {operator: alice}
+  - uri: s3://fleet/2026-11-*/*.mcap   # globs expand, sorted
+```
+Relative paths are relative to the manifest file.
+"""
+
+from __future__ import annotations
+
+import posixpath
+from dataclasses import dataclass, field
+from typing import Any
+
+import fsspec
+import pydantic
+import yaml
+from fsspec.core import url_to_fs
+
+from bagport.errors import ManifestError
+from bagport.yamlsource import load_yaml, primary_error
+
+__all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
+
+_GLOB_CHARS = frozenset("*?[")
+
+
+class _Entry(pydantic.BaseModel):
+    model_config = pydantic.ConfigDict(extra="forbid", frozen=True)
+    uri: str = pydantic.Field(min_length=1)
+    task: str | None = None
+    metadata: dict[str, Any] = pydantic.Field(default_factory=dict)
+
+
+class _Manifest(pydantic.BaseModel):
+    model_config = pydantic.ConfigDict(extra="forbid", frozen=True)
+    bags: list[_Entry] = pydantic.Field(min_length=1)
+
+
+@dataclass(frozen=True, slots=True)
+class BagEntry:
+    """One bag to convert; ``entry`` is its index in the manifest's ``bags`` list."""
+
+    uri: str
+    entry: int
+    task: str | None = None
+    metadata: dict[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True, slots=True)
+class Manifest:
+    source: str
+    bags: tuple[BagEntry, ...]
+
+
+def _is_url(uri: str) -> bool:
+    return "://" in uri
+
+
+def _absolute(uri: str, base_dir: str) -> str:
+    if _is_url(uri) or uri.startswith("/") or not base_dir:
+        return uri
+    return posixpath.normpath(posixpath.join(base_dir, uri))
+
+
+def _expand(uri: str, entry: int, source: str, storage_options: dict[str, Any]) -> list[str]:
+    try:
+        fs, path = url_to_fs(uri, **storage_options)
+    except (ImportError, ValueError) as err:
+        raise ManifestError(f"uri {uri!r} cannot be opened: {err}", file=source, entry=entry) from err
+    protocol = fs.protocol[0] if isinstance(fs.protocol, tuple) else fs.protocol
+    prefix = "" if protocol in ("file", "local") else f"{protocol}://"
+    try:
+        if _GLOB_CHARS & set(path):
+            found = sorted(fs.glob(path))
+            if not found:
+                raise ManifestError(
+                    f"glob {uri!r} matches no bag", file=source, entry=entry, fix="check the pattern and the folder."
+                )
+            return [prefix + p if prefix and not p.startswith(prefix) else p for p in found]
+        if not fs.exists(path):
+            raise ManifestError(
+                f"bag {uri!r} does not exist",
+                file=source,
+                entry=entry,
+                fix="fix the path (relative paths are relative to the manifest file) or remove the entry.",
+            )
+    except ManifestError:
+        raise
+    except (PermissionError, OSError) as err:
+        raise ManifestError(f"bag {uri!r} cannot be reached: {err}", file=source, entry=entry) from err
+    return [uri]
+
+
+def parse_manifest(
+    text: str, source: str = "manifest", *, base_dir: str = "", storage_options: dict[str, Any] | None = None
+) -> Manifest:
+    """Validate manifest YAML and expand globs; every error names the entry."""
+    try:
+        parsed = load_yaml(text, source)
+    except yaml.YAMLError as err:
+        raise ManifestError(f"is not valid YAML: {err}", file=source) from err
+    try:
+        model = _Manifest.model_validate(parsed.data)
+    except pydantic.ValidationError as err:
+        first = primary_error(err)
+        loc = tuple(first["loc"])
+        entry = loc[1] if len(loc) > 1 and loc[0] == "bags" and isinstance(loc[1], int) else None
+        line = parsed.line_of(loc)
+        where = ".".join(str(p) for p in loc) or "top level"
+        raise ManifestError(
+            f"line {line}: {where}: {first['msg']}",
+            file=source,
+            entry=entry,
+            fix="a manifest is 'bags:' followed by a list of {uri, task, metadata} entries.",
+        ) from err
+    bags: list[BagEntry] = []
+    seen: dict[str, int] = {}
+    for index, item in enumerate(model.bags):
+        uri = _absolute(item.uri, base_dir)
+        for found in _expand(uri, index, source, dict(storage_options or {})):
+            if found in seen:
+                raise ManifestError(
+                    f"bag {found!r} is listed twice (also bags[{seen[found]}])",
+                    file=source,
+                    entry=index,
+                    fix="remove the duplicate; one bag is one episode.",
+                )
+            seen[found] = index
+            bags.append(BagEntry(uri=found, entry=index, task=item.task, metadata=dict(item.metadata)))
+    return Manifest(source=source, bags=tuple(bags))
+
+
+def load_manifest(uri: str, *, storage_options: dict[str, Any] | None = None) -> Manifest:
+    """Read a manifest from a local path or any fsspec URI."""
+    try:
+        with fsspec.open(uri, "r", encoding="utf-8", **(storage_options or {})) as handle:
+            text = str(handle.read())
+    except FileNotFoundError as err:
+        raise ManifestError("file does not exist", file=uri, fix="check the --manifest path.") from err
+    base_dir = posixpath.dirname(uri) if _is_url(uri) else posixpath.dirname(posixpath.abspath(uri))
+    return parse_manifest(text, uri, base_dir=base_dir, storage_options=storage_options)

@@ -1,0 +1,24 @@
+"""Well-known ROS message type names, named once."""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+__all__ = ["IMAGE_TYPES", "RosType"]
+
+
+class RosType(StrEnum):
+    JOINT_STATE = "sensor_msgs/msg/JointState"
+    IMAGE = "sensor_msgs/msg/Image"
+    COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
+    STRING = "std_msgs/msg/String"
+    FLOAT32 = "std_msgs/msg/Float32"
+    FLOAT64 = "std_msgs/msg/Float64"
+    FLOAT32_MULTI_ARRAY = "std_msgs/msg/Float32MultiArray"
+    FLOAT64_MULTI_ARRAY = "std_msgs/msg/Float64MultiArray"
+    INT32 = "std_msgs/msg/Int32"
+    INT64 = "std_msgs/msg/Int64"
+    BOOL = "std_msgs/msg/Bool"
+
+
+IMAGE_TYPES = frozenset({RosType.IMAGE.value, RosType.COMPRESSED_IMAGE.value})

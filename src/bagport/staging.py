@@ -1,0 +1,124 @@
+"""The staged artifact of one episode, shared between workers through fsspec.
+
+```
+<staging>/episodes/<episode_id>/
+    frames.parquet        timestamp, frame_index, task, one column per vector feature
+    provenance.parquet    per frame and source: topic, log time, header stamp, stamp used
+    stats.json            per-feature stats partials (+ pixel histograms for videos)
+    videos/<key>.mp4      one clip per camera, pts = frame index
+    episode.json          the summary; written last, so its presence marks completion
+```
+"""
+
+from __future__ import annotations
+
+import json
+import posixpath
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import fsspec
+from fsspec.core import url_to_fs
+
+from bagport.errors import TransientError
+
+__all__ = [
+    "EPISODE_SUMMARY",
+    "EpisodeSummary",
+    "StagedFeature",
+    "episode_dir",
+    "read_summary",
+    "staged_path",
+    "write_json",
+]
+
+EPISODE_SUMMARY = "episode.json"
+FRAMES_FILE = "frames.parquet"
+PROVENANCE_FILE = "provenance.parquet"
+STATS_FILE = "stats.json"
+
+
+@dataclass(frozen=True, slots=True)
+class StagedFeature:
+    key: str
+    dtype: str
+    shape: tuple[int, ...]
+    names: tuple[str, ...] | None
+    video_info: dict[str, Any] | None = None
+    sources: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeSummary:
+    """Everything the reduce step needs to know about one staged episode."""
+
+    episode_id: str
+    dir_uri: str
+    bag_uri: str
+    storage: str
+    bag_size_bytes: int
+    bag_fingerprint: str
+    manifest_entry: int
+    fps: int
+    frames: int
+    first_tick_ns: int
+    last_tick_ns: int
+    tasks: tuple[str, ...]
+    task_source: str
+    features: tuple[StagedFeature, ...]
+    stamp_sources: dict[str, str]
+    videos: dict[str, str]
+    metadata: dict[str, Any] = field(default_factory=dict)
+    bagport_version: str = ""
+    contract_sha256: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EpisodeSummary:
+        features = tuple(
+            StagedFeature(
+                key=f["key"],
+                dtype=f["dtype"],
+                shape=tuple(f["shape"]),
+                names=tuple(f["names"]) if f["names"] is not None else None,
+                video_info=f.get("video_info"),
+                sources=tuple(f.get("sources", ())),
+            )
+            for f in data["features"]
+        )
+        values = {k: v for k, v in data.items() if k != "features"}
+        values["tasks"] = tuple(values["tasks"])
+        return cls(features=features, **values)
+
+    def file(self, name: str) -> str:
+        return staged_path(self.dir_uri, name)
+
+
+def episode_dir(staging_uri: str, episode_id: str) -> str:
+    return staged_path(staging_uri, "episodes", episode_id)
+
+
+def staged_path(base: str, *parts: str) -> str:
+    return posixpath.join(base.rstrip("/"), *parts)
+
+
+def write_json(uri: str, data: Any) -> None:
+    fs, path = url_to_fs(uri)
+    fs.makedirs(posixpath.dirname(path), exist_ok=True)
+    try:
+        with fs.open(path, "w", encoding="utf-8") as handle:
+            json.dump(data, handle, indent=1, sort_keys=False)
+    except ConnectionError as err:
+        raise TransientError(f"{uri}: write failed ({err}); try again") from err
+
+
+def read_summary(dir_uri: str) -> EpisodeSummary | None:
+    """The summary of a completed staged episode, or ``None`` if it never completed."""
+    uri = staged_path(dir_uri, EPISODE_SUMMARY)
+    try:
+        with fsspec.open(uri, "r", encoding="utf-8") as handle:
+            return EpisodeSummary.from_dict(json.load(handle))
+    except FileNotFoundError:
+        return None

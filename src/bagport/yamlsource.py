@@ -1,0 +1,65 @@
+"""YAML loading that remembers where every value came from (file and line).
+
+Pydantic reports errors as a path of keys and indices (``("observations", 1,
+"topic")``); :class:`YamlSource` turns such a path back into a line number so an
+error can point at the exact place in the user's file.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import pydantic
+import yaml
+from pydantic_core import ErrorDetails
+
+__all__ = ["YamlSource", "load_yaml", "primary_error"]
+
+
+@dataclass(frozen=True, slots=True)
+class YamlSource:
+    """Parsed YAML plus its node tree, for mapping value paths to lines."""
+
+    name: str
+    data: Any
+    root: yaml.Node | None
+
+    def line_of(self, loc: Sequence[int | str]) -> int | None:
+        """1-based line of the deepest node on ``loc`` that exists in the file."""
+        node = self.root
+        line = node.start_mark.line + 1 if node is not None else None
+        for part in loc:
+            child = _child(node, part)
+            if child is None:
+                break
+            anchor, node = child
+            line = anchor.start_mark.line + 1
+        return line
+
+
+def _child(node: yaml.Node | None, part: int | str) -> tuple[yaml.Node, yaml.Node] | None:
+    """(node whose line names the step, child node); for a mapping the key's line."""
+    if isinstance(node, yaml.MappingNode):
+        for key_node, value_node in node.value:
+            if isinstance(key_node, yaml.ScalarNode) and key_node.value == str(part):
+                return key_node, value_node
+    if isinstance(node, yaml.SequenceNode) and isinstance(part, int) and 0 <= part < len(node.value):
+        item: yaml.Node = node.value[part]
+        return item, item
+    return None
+
+
+def load_yaml(text: str, name: str) -> YamlSource:
+    """Parse ``text``; raises ``yaml.YAMLError`` (with its own mark) on bad syntax."""
+    root = yaml.compose(text, Loader=yaml.SafeLoader)
+    data = yaml.safe_load(text)
+    return YamlSource(name=name, data=data, root=root)
+
+
+def primary_error(err: pydantic.ValidationError) -> ErrorDetails:
+    """The error to show first: a misspelt field shows up twice (unknown + required
+    missing) and the unknown one names the typo."""
+    errors = err.errors()
+    return next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])

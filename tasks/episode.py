@@ -1,0 +1,47 @@
+"""Convert one bag into a staged episode (the map step)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from prefect import Task, get_run_logger, task
+from prefect.client.schemas.objects import TaskRun
+from prefect.states import State
+
+from bagport.episode import EpisodeRequest, convert_episode
+from bagport.errors import TransientError
+
+__all__ = ["convert_episode_task", "retry_only_transient"]
+
+
+def retry_only_transient(_task: Task[Any, Any], _run: TaskRun, state: State[Any]) -> bool:
+    """Retry network hiccups; a bad bag fails fast."""
+    try:
+        state.result()
+    except TransientError:
+        return True
+    except Exception:  # any other failure is final
+        return False
+    return False
+
+
+@task(
+    name="convert-episode",
+    task_run_name="convert {label}",
+    retries=2,
+    retry_delay_seconds=[2, 10],
+    retry_condition_fn=retry_only_transient,
+    tags=["bagport", "episode"],
+)
+def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any]:
+    """Returns the staged episode's folder URI and a small summary, never arrays."""
+    episode = EpisodeRequest(**request)
+    summary = convert_episode(episode)
+    get_run_logger().info("%s: %d frames staged at %s", label, summary.frames, summary.dir_uri)
+    return {
+        "episode_id": summary.episode_id,
+        "dir_uri": summary.dir_uri,
+        "bag_uri": summary.bag_uri,
+        "frames": summary.frames,
+        "tasks": list(summary.tasks),
+    }

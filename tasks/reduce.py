@@ -1,0 +1,19 @@
+"""Merge staged episodes into the LeRobot dataset (the reduce step)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+from prefect import get_run_logger, task
+
+from bagport.dataset import DatasetReport
+from bagport.run import RunPlan, reduce_run
+
+__all__ = ["reduce_task"]
+
+
+@task(name="write-dataset")
+def reduce_task(plan: RunPlan, staged: list[dict[str, Any]]) -> DatasetReport:
+    report = reduce_run(plan, [item["dir_uri"] for item in staged])
+    get_run_logger().info("wrote %d episode(s), %d frames to %s", report.episodes, report.frames, report.root)
+    return report

@@ -1,0 +1,57 @@
+"""Stats partials and their merge agree with stats computed over all data at once."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from bagport.stats import ImageStatsAccumulator, merge_feature_stats, merge_histograms, vector_stats
+
+
+@settings(max_examples=40, deadline=None)
+@given(sizes=st.lists(st.integers(1, 50), min_size=1, max_size=6), seed=st.integers(0, 1000))
+def test_merged_moments_equal_pooled_moments(sizes: list[int], seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    parts = [rng.normal(size=(n, 3)) * (i + 1) for i, n in enumerate(sizes)]
+    merged = merge_feature_stats([vector_stats(p) for p in parts])
+    pooled = np.concatenate(parts)
+    np.testing.assert_allclose(merged["mean"], pooled.mean(axis=0), atol=1e-9)
+    np.testing.assert_allclose(merged["std"], pooled.std(axis=0), atol=1e-9)
+    np.testing.assert_array_equal(merged["min"], pooled.min(axis=0))
+    np.testing.assert_array_equal(merged["max"], pooled.max(axis=0))
+    assert merged["count"].tolist() == [sum(sizes)]
+
+
+def test_image_stats_are_per_channel_in_unit_range_and_exact() -> None:
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, size=(40, 60, 3), dtype=np.uint8) for _ in range(5)]
+    frames[0][:, :, 0] = 255  # red channel saturated in one frame
+    acc = ImageStatsAccumulator(max_side=1000)  # no subsampling: exact
+    for frame in frames:
+        acc.update(frame)
+    stats = acc.result()
+    pixels = np.stack(frames).reshape(-1, 3) / 255.0
+    assert stats["mean"].shape == (3, 1, 1)
+    np.testing.assert_allclose(stats["mean"].ravel(), pixels.mean(axis=0), atol=1e-12)
+    np.testing.assert_allclose(stats["std"].ravel(), pixels.std(axis=0), atol=1e-9)
+    np.testing.assert_allclose(stats["max"].ravel(), pixels.max(axis=0))
+    np.testing.assert_allclose(stats["q50"].ravel(), np.quantile(pixels, 0.5, axis=0, method="inverted_cdf"))
+    assert stats["count"].tolist() == [5]
+
+
+def test_histogram_merge_is_exact_across_episodes() -> None:
+    rng = np.random.default_rng(1)
+    accs = []
+    all_frames = []
+    for _ in range(3):
+        acc = ImageStatsAccumulator(max_side=1000)
+        for _ in range(4):
+            frame = rng.integers(0, 256, size=(8, 8, 3), dtype=np.uint8)
+            acc.update(frame)
+            all_frames.append(frame)
+        accs.append(acc)
+    merged = merge_histograms([a.histogram() for a in accs], [a.frames for a in accs])
+    pixels = np.stack(all_frames).reshape(-1, 3) / 255.0
+    np.testing.assert_allclose(merged["q90"].ravel(), np.quantile(pixels, 0.9, axis=0, method="inverted_cdf"))
+    assert merged["count"].tolist() == [12]

@@ -1,0 +1,71 @@
+"""Manifests: relative paths, globs, fsspec URIs; every error names the entry."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import fsspec
+import pytest
+
+from bagport.errors import ManifestError
+from bagport.manifest import load_manifest, parse_manifest
+
+
+def _touch(path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(b"x")
+    return path
+
+
+def test_relative_paths_globs_and_defaults(tmp_path: Path) -> None:
+    _touch(tmp_path / "bags/a.mcap")
+    _touch(tmp_path / "bags/b.mcap")
+    (tmp_path / "bags/folder_bag").mkdir()
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(
+        "bags:\n"
+        "  - uri: bags/folder_bag\n    task: fold the towel\n    metadata: {operator: alice}\n"
+        "  - uri: bags/*.mcap\n"
+    )
+    loaded = load_manifest(str(manifest))
+    assert [Path(b.uri).name for b in loaded.bags] == ["folder_bag", "a.mcap", "b.mcap"]
+    assert loaded.bags[0].task == "fold the towel"
+    assert loaded.bags[0].metadata == {"operator": "alice"}
+    assert [b.entry for b in loaded.bags] == [0, 1, 1]
+    assert all(Path(b.uri).is_absolute() for b in loaded.bags)
+
+
+def test_fsspec_uris(tmp_path: Path) -> None:
+    fs = fsspec.filesystem("memory")
+    fs.pipe("/fleet/day1/ep1.mcap", b"x")
+    fs.pipe("/fleet/day1/ep2.mcap", b"x")
+    loaded = parse_manifest("bags:\n  - uri: memory://fleet/day1/*.mcap\n", "m.yaml")
+    assert [b.uri for b in loaded.bags] == ["memory:///fleet/day1/ep1.mcap", "memory:///fleet/day1/ep2.mcap"]
+
+
+@pytest.mark.parametrize(
+    ("text", "match"),
+    [
+        pytest.param("bags:\n  - uri: nope.mcap\n", r"m\.yaml, bags\[0\]: bag '.*nope\.mcap' does not exist.*Fix:", id="missing"),
+        pytest.param("bags:\n  - uri: '*.nothing'\n", r"bags\[0\]: glob .* matches no bag", id="empty-glob"),
+        pytest.param("bags: []\n", r"at least 1", id="empty"),
+        pytest.param("bag:\n  - uri: x\n", r"line 1: bag: Extra inputs", id="typo-top"),
+        pytest.param("bags:\n  - {uri: a.mcap}\n  - {url: b.mcap}\n", r"bags\[1\].*line 3", id="entry-field"),
+        pytest.param("bags: [\n", r"not valid YAML", id="bad-yaml"),
+    ],
+)
+def test_manifest_errors_name_the_entry(tmp_path: Path, text: str, match: str) -> None:
+    _touch(tmp_path / "a.mcap")
+    with pytest.raises(ManifestError, match=match):
+        parse_manifest(text, "m.yaml", base_dir=str(tmp_path))
+
+
+def test_duplicate_bag_is_an_error(tmp_path: Path) -> None:
+    _touch(tmp_path / "a.mcap")
+    with pytest.raises(ManifestError, match=r"bags\[1\]: bag .* is listed twice"):
+        parse_manifest("bags:\n  - uri: a.mcap\n  - uri: '*.mcap'\n", "m.yaml", base_dir=str(tmp_path))
+
+
+def test_missing_manifest_file() -> None:
+    with pytest.raises(ManifestError, match="does not exist"):
+        load_manifest("/no/such/manifest.yaml")

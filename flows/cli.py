@@ -93,7 +93,9 @@ def _cmd_validate(args: argparse.Namespace) -> int:
 def _cmd_synth(args: argparse.Namespace) -> int:
     from bagport.synth import write_sample_fleet  # noqa: PLC0415
 
-    paths = write_sample_fleet(Path(args.out), episodes=args.episodes, duration_s=args.duration, seed=args.seed)
+    paths = write_sample_fleet(
+        Path(args.out), episodes=args.episodes, duration_s=args.duration, seed=args.seed
+    )
     for path in paths:
         print(path)
     print(f"wrote {len(paths)} bag(s) and {Path(args.out) / 'manifest.yaml'}", file=sys.stderr)

@@ -17,11 +17,21 @@ class ConvertConfig(BaseModel):
     manifest: str = Field(description="Manifest YAML: local path or fsspec URI.")
     contract: str = Field(description="Contract YAML: local path or fsspec URI.")
     output: str = Field(description="Dataset root folder to create (LeRobot's `root`).")
-    repo_id: str | None = Field(default=None, description="LeRobot repo id; default 'local/<output folder name>'.")
-    staging: str | None = Field(default=None, description="Staging store URI; default '<output>.staging' beside it.")
-    workers: PositiveInt | None = Field(default=None, description="Parallel episode workers; default: CPU count.")
-    runner: Literal["process", "thread"] = Field(default="process", description="Task runner for the fan-out.")
-    encoder: dict[str, Any] = Field(default_factory=dict, description="Video encoder settings (see configs/codecs).")
+    repo_id: str | None = Field(
+        default=None, description="LeRobot repo id; default 'local/<output folder name>'."
+    )
+    staging: str | None = Field(
+        default=None, description="Staging store URI; default '<output>.staging' beside it."
+    )
+    workers: PositiveInt | None = Field(
+        default=None, description="Parallel episode workers; default: CPU count."
+    )
+    runner: Literal["process", "thread"] = Field(
+        default="process", description="Task runner for the fan-out."
+    )
+    encoder: dict[str, Any] = Field(
+        default_factory=dict, description="Video encoder settings (see configs/codecs)."
+    )
     chunks_size: PositiveInt = 1000
     data_files_size_in_mb: PositiveInt = 100
     video_files_size_in_mb: PositiveInt = 200

@@ -50,7 +50,9 @@ class TransientError(BagportError):
 class ManifestError(BagportError):
     """The manifest of bags is malformed or names bags that cannot be found."""
 
-    def __init__(self, what: str, *, file: str | None = None, entry: int | None = None, fix: str = "") -> None:
+    def __init__(
+        self, what: str, *, file: str | None = None, entry: int | None = None, fix: str = ""
+    ) -> None:
         self.file = file
         self.entry = entry
         where = f"{file}" if file else "manifest"

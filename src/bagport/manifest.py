@@ -79,7 +79,10 @@ def _expand(uri: str, entry: int, source: str, storage_options: dict[str, Any]) 
             found = sorted(fs.glob(path))
             if not found:
                 raise ManifestError(
-                    f"glob {uri!r} matches no bag", file=source, entry=entry, fix="check the pattern and the folder."
+                    f"glob {uri!r} matches no bag",
+                    file=source,
+                    entry=entry,
+                    fix="check the pattern and the folder.",
                 )
             return [prefix + p if prefix and not p.startswith(prefix) else p for p in found]
         if not fs.exists(path):

@@ -96,7 +96,9 @@ def reduce_run(plan: RunPlan, staged_dirs: Sequence[str]) -> DatasetReport:
     for uri in staged_dirs:
         summary = read_summary(uri)
         if summary is None:
-            raise DatasetWriteError(f"staged episode {uri} is incomplete (no episode.json); re-run the conversion.")
+            raise DatasetWriteError(
+                f"staged episode {uri} is incomplete (no episode.json); re-run the conversion."
+            )
         summaries.append(summary)
     limits = DatasetLimits(
         chunks_size=plan.config.chunks_size,

@@ -46,7 +46,11 @@ def test_fsspec_uris(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        pytest.param("bags:\n  - uri: nope.mcap\n", r"m\.yaml, bags\[0\]: bag '.*nope\.mcap' does not exist.*Fix:", id="missing"),
+        pytest.param(
+            "bags:\n  - uri: nope.mcap\n",
+            r"m\.yaml, bags\[0\]: bag '.*nope\.mcap' does not exist.*Fix:",
+            id="missing",
+        ),
         pytest.param("bags:\n  - uri: '*.nothing'\n", r"bags\[0\]: glob .* matches no bag", id="empty-glob"),
         pytest.param("bags: []\n", r"at least 1", id="empty"),
         pytest.param("bag:\n  - uri: x\n", r"line 1: bag: Extra inputs", id="typo-top"),

@@ -39,7 +39,9 @@ def normalize_msgtype(msgtype: str) -> str:
 
 def _check_key(key: str) -> str:
     if not key or "/" in key:
-        raise ValueError(f"feature key {key!r} must be non-empty and must not contain '/' (LeRobot forbids it)")
+        raise ValueError(
+            f"feature key {key!r} must be non-empty and must not contain '/' (LeRobot forbids it)"
+        )
     return key
 
 

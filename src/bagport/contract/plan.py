@@ -111,7 +111,9 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
         entries += [(e, section, None) for e in getattr(contract, section)]
     if not entries:
         raise ContractError(
-            "declares no features", file=source_name, fix="add at least one entry under 'observations' or 'actions'."
+            "declares no features",
+            file=source_name,
+            fix="add at least one entry under 'observations' or 'actions'.",
         )
 
     grouped: dict[str, list[tuple[SourceSpec, str | None]]] = {}

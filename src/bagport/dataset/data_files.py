@@ -6,6 +6,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow as pa
@@ -41,14 +42,18 @@ def hf_features_metadata(vectors: Sequence[StagedFeature]) -> bytes:
 
 
 def _episode_table(
-    summary: EpisodeSummary, episode_index: int, first_index: int, task_index: dict[str, int], vectors: Sequence[StagedFeature]
+    summary: EpisodeSummary,
+    episode_index: int,
+    first_index: int,
+    task_index: dict[str, int],
+    vectors: Sequence[StagedFeature],
 ) -> pa.Table:
     fs, path = url_to_fs(summary.file(FRAMES_FILE))
     with fs.open(path, "rb") as handle:
         staged = pq.read_table(handle)
     frames = staged.num_rows
-    tasks = staged.column("task").to_pylist()
-    columns = {f.key: staged.column(f.key) for f in vectors}
+    tasks = [str(t) for t in staged.column("task").to_pylist()]
+    columns: dict[str, Any] = {f.key: staged.column(f.key) for f in vectors}
     columns["timestamp"] = staged.column("timestamp")
     columns["frame_index"] = staged.column("frame_index")
     columns["episode_index"] = pa.array(np.full(frames, episode_index, dtype=np.int64))
@@ -83,7 +88,7 @@ def write_data_files(
                 writer.close()
                 writer = None
                 chunk, file = next_chunk_file(chunk, file, chunks_size)
-            if writer is None:
+            if writer is None or schema is None:
                 path = root / DATA_PATH.format(chunk_index=chunk, file_index=file)
                 path.parent.mkdir(parents=True, exist_ok=True)
                 schema = table.schema.with_metadata(metadata)

@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from bagport.dataset.layout import CODEBASE_VERSION, DEFAULT_FEATURES, INFO_PATH, STATS_PATH, TASKS_PATH
@@ -22,8 +23,19 @@ from bagport.video import probe_video
 __all__ = ["check_invariants"]
 
 _REQUIRED_INFO = (
-    "codebase_version", "robot_type", "fps", "features", "total_episodes", "total_frames", "total_tasks",
-    "chunks_size", "data_files_size_in_mb", "video_files_size_in_mb", "data_path", "video_path", "splits",
+    "codebase_version",
+    "robot_type",
+    "fps",
+    "features",
+    "total_episodes",
+    "total_frames",
+    "total_tasks",
+    "chunks_size",
+    "data_files_size_in_mb",
+    "video_files_size_in_mb",
+    "data_path",
+    "video_path",
+    "splits",
 )
 _TIME_TOL_S = 1e-4
 
@@ -57,89 +69,101 @@ def _load_info(root: Path) -> dict[str, Any]:
     return info
 
 
-def _check_episode_rows(root: Path, info: dict[str, Any], episodes: pd.DataFrame) -> None:
+Row = dict[str, Any]
+
+
+def _check_episode_rows(root: Path, info: dict[str, Any], episodes: list[Row]) -> None:
     fps = int(info["fps"])
     where = root / "meta/episodes"
-    if list(episodes["episode_index"]) != list(range(len(episodes))):
+    if [row["episode_index"] for row in episodes] != list(range(len(episodes))):
         raise _fail(where, "episode_index is not 0..N-1 in order")
     if len(episodes) != info["total_episodes"]:
         raise _fail(where, f"{len(episodes)} episodes but info.total_episodes={info['total_episodes']}")
     expected_from = 0
-    for row in episodes.itertuples(index=False):
-        ep = row.episode_index
-        start, stop, length = row.dataset_from_index, row.dataset_to_index, row.length
+    video_keys = [k for k, f in info["features"].items() if f["dtype"] == "video"]
+    for row in episodes:
+        ep = row["episode_index"]
+        start, stop, length = row["dataset_from_index"], row["dataset_to_index"], row["length"]
         if start != expected_from or stop - start != length or length <= 0:
-            raise _fail(where, f"episode {ep}: index range [{start}, {stop}) length {length} is not contiguous")
+            raise _fail(
+                where, f"episode {ep}: index range [{start}, {stop}) length {length} is not contiguous"
+            )
         expected_from = stop
+        for key in video_keys:
+            span = (row[f"videos/{key}/to_timestamp"] - row[f"videos/{key}/from_timestamp"]) * fps
+            if abs(span - length) > 1e-3:
+                raise _fail(where, f"episode {ep}: videos/{key} spans {span:.4f} frames, length is {length}")
     if expected_from != info["total_frames"]:
         raise _fail(where, f"episodes cover {expected_from} frames, info.total_frames={info['total_frames']}")
-    video_keys = [k for k, f in info["features"].items() if f["dtype"] == "video"]
-    for key in video_keys:
-        frm = episodes[f"videos/{key}/from_timestamp"].to_numpy()
-        to = episodes[f"videos/{key}/to_timestamp"].to_numpy()
-        span = (to - frm) * fps
-        bad = np.flatnonzero(np.abs(span - episodes["length"].to_numpy()) > 1e-3)
-        if bad.size:
-            ep = int(episodes["episode_index"].iloc[bad[0]])
-            raise _fail(where, f"episode {ep}: videos/{key} spans {span[bad[0]]:.4f} frames, length is "
-                        f"{int(episodes['length'].iloc[bad[0]])}")
 
 
-def _check_data(root: Path, info: dict[str, Any], episodes: pd.DataFrame) -> None:
+def _group(episodes: list[Row], *columns: str) -> dict[tuple[int, ...], list[Row]]:
+    groups: dict[tuple[int, ...], list[Row]] = {}
+    for row in episodes:
+        groups.setdefault(tuple(int(row[c]) for c in columns), []).append(row)
+    return dict(sorted(groups.items()))
+
+
+def _check_data(root: Path, info: dict[str, Any], episodes: list[Row]) -> None:
     fps = int(info["fps"])
     columns = [k for k, f in info["features"].items() if f["dtype"] not in ("video", "image")]
-    for (chunk, file), group in episodes.groupby(["data/chunk_index", "data/file_index"], sort=True):
+    for (chunk, file), group in _group(episodes, "data/chunk_index", "data/file_index").items():
         path = root / info["data_path"].format(chunk_index=chunk, file_index=file)
         if not path.is_file():
-            raise _fail(path, f"missing (referenced by episodes {list(group['episode_index'])})")
+            raise _fail(path, f"missing (referenced by episodes {[r['episode_index'] for r in group]})")
         table = pq.read_table(path)
         extra = set(table.column_names) - set(columns)
         absent = set(columns) - set(table.column_names)
         if extra or absent:
-            raise _fail(path, f"columns differ from info.features: undeclared {sorted(extra)}, missing {sorted(absent)}")
+            raise _fail(
+                path,
+                f"columns differ from info.features: undeclared {sorted(extra)}, missing {sorted(absent)}",
+            )
         ep_col = table.column("episode_index").to_numpy()
-        for row in group.itertuples(index=False):
-            mask = ep_col == row.episode_index
-            frames = table.filter(mask)
+        for row in group:
+            ep = row["episode_index"]
+            frames = table.filter(pa.array(ep_col == ep))
             n = frames.num_rows
-            if n != row.length:
-                raise _fail(path, f"episode {row.episode_index} has {n} rows, meta says {row.length}")
-            frame_index = frames.column("frame_index").to_numpy()
-            if not np.array_equal(frame_index, np.arange(n)):
-                raise _fail(path, f"episode {row.episode_index}: frame_index is not 0..{n - 1}")
-            index = frames.column("index").to_numpy()
-            if not np.array_equal(index, np.arange(row.dataset_from_index, row.dataset_to_index)):
-                raise _fail(path, f"episode {row.episode_index}: index is not {row.dataset_from_index}..")
+            if n != row["length"]:
+                raise _fail(path, f"episode {ep} has {n} rows, meta says {row['length']}")
+            if not np.array_equal(frames.column("frame_index").to_numpy(), np.arange(n)):
+                raise _fail(path, f"episode {ep}: frame_index is not 0..{n - 1}")
+            expected_index = np.arange(row["dataset_from_index"], row["dataset_to_index"])
+            if not np.array_equal(frames.column("index").to_numpy(), expected_index):
+                raise _fail(path, f"episode {ep}: index is not {row['dataset_from_index']}..")
             ts = frames.column("timestamp").to_numpy()
             expected = (np.arange(n) / fps).astype(np.float32)
             if not np.allclose(ts, expected, atol=_TIME_TOL_S, rtol=0):
                 k = int(np.argmax(np.abs(ts - expected)))
-                raise _fail(path, f"episode {row.episode_index} frame {k}: timestamp {ts[k]} != {k}/{fps}")
+                raise _fail(path, f"episode {ep} frame {k}: timestamp {ts[k]} != {k}/{fps}")
             tasks = frames.column("task_index").to_numpy()
             if tasks.min() < 0 or tasks.max() >= info["total_tasks"]:
-                raise _fail(path, f"episode {row.episode_index}: task_index outside 0..{info['total_tasks'] - 1}")
+                raise _fail(path, f"episode {ep}: task_index outside 0..{info['total_tasks'] - 1}")
 
 
-def _check_videos(root: Path, info: dict[str, Any], episodes: pd.DataFrame) -> None:
+def _check_videos(root: Path, info: dict[str, Any], episodes: list[Row]) -> None:
     fps = int(info["fps"])
     for key, feature in info["features"].items():
         if feature["dtype"] != "video":
             continue
-        cols = [f"videos/{key}/chunk_index", f"videos/{key}/file_index"]
-        for (chunk, file), group in episodes.groupby(cols, sort=True):
+        for (chunk, file), group in _group(
+            episodes, f"videos/{key}/chunk_index", f"videos/{key}/file_index"
+        ).items():
             path = root / info["video_path"].format(video_key=key, chunk_index=chunk, file_index=file)
             if not path.is_file():
-                raise _fail(path, f"missing (referenced by episodes {list(group['episode_index'])})")
+                raise _fail(path, f"missing (referenced by episodes {[r['episode_index'] for r in group]})")
             probed = probe_video(path)
             vinfo = feature.get("info", {})
             if (probed.height, probed.width) != (vinfo.get("video.height"), vinfo.get("video.width")):
-                raise _fail(path, f"is {probed.width}x{probed.height}, info says "
-                            f"{vinfo.get('video.width')}x{vinfo.get('video.height')}")
+                raise _fail(
+                    path,
+                    f"is {probed.width}x{probed.height}, info says {vinfo.get('video.width')}x{vinfo.get('video.height')}",
+                )
             if probed.codec != vinfo.get("video.codec"):
                 raise _fail(path, f"codec {probed.codec!r}, info says {vinfo.get('video.codec')!r}")
-            last_to = float(group[f"videos/{key}/to_timestamp"].max())
-            if abs(probed.frames / fps - last_to) > _TIME_TOL_S and probed.frames < round(last_to * fps):
-                raise _fail(path, f"has {probed.frames} frames, episodes need {round(last_to * fps)}")
+            needed = round(max(r[f"videos/{key}/to_timestamp"] for r in group) * fps)
+            if probed.frames < needed:
+                raise _fail(path, f"has {probed.frames} frames, episodes need {needed}")
 
 
 def _check_stats(root: Path, info: dict[str, Any]) -> None:
@@ -161,7 +185,9 @@ def _check_stats(root: Path, info: dict[str, Any]) -> None:
             if feature["dtype"] == "video" and value.shape != (3, 1, 1):
                 raise _fail(path, f"{key}/{stat} has shape {value.shape}, expected (3, 1, 1)")
             if feature["dtype"] != "video" and value.shape != tuple(feature["shape"]):
-                raise _fail(path, f"{key}/{stat} has shape {value.shape}, feature shape is {feature['shape']}")
+                raise _fail(
+                    path, f"{key}/{stat} has shape {value.shape}, feature shape is {feature['shape']}"
+                )
 
 
 def check_invariants(root: Path) -> dict[str, Any]:
@@ -176,7 +202,9 @@ def check_invariants(root: Path) -> dict[str, Any]:
     episode_files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
     if not episode_files:
         raise _fail(root / "meta/episodes", "no episodes parquet")
-    episodes = pd.concat([pd.read_parquet(p) for p in episode_files], ignore_index=True)
+    episodes: list[Row] = []
+    for episode_file in episode_files:
+        episodes.extend(pq.read_table(episode_file).to_pylist())
     _check_episode_rows(root, info, episodes)
     _check_data(root, info, episodes)
     _check_videos(root, info, episodes)

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -48,17 +49,17 @@ class DatasetLimits:
 @dataclass(frozen=True, slots=True)
 class EpisodeStats:
     stats: dict[str, FeatureStats]
-    histograms: dict[str, np.ndarray]
+    histograms: dict[str, npt.NDArray[np.int64]]
 
 
 def load_episode_stats(
-    summary: EpisodeSummary, episode_index: int, placement: DataPlacement, task_indices: np.ndarray
+    summary: EpisodeSummary, episode_index: int, placement: DataPlacement, task_indices: npt.NDArray[np.int64]
 ) -> EpisodeStats:
     fs, path = url_to_fs(summary.file(STATS_FILE))
     with fs.open(path, "r") as handle:
         raw: dict[str, dict[str, Any]] = json.load(handle)
     stats: dict[str, FeatureStats] = {}
-    histograms: dict[str, np.ndarray] = {}
+    histograms: dict[str, npt.NDArray[np.int64]] = {}
     for key, values in raw.items():
         hist = values.pop("histogram", None)
         if hist is not None:
@@ -86,7 +87,11 @@ def build_info(
 ) -> dict[str, Any]:
     feature_dict: dict[str, Any] = {}
     for f in features:
-        entry: dict[str, Any] = {"dtype": f.dtype, "shape": list(f.shape), "names": list(f.names) if f.names else None}
+        entry: dict[str, Any] = {
+            "dtype": f.dtype,
+            "shape": list(f.shape),
+            "names": list(f.names) if f.names else None,
+        }
         if f.video_info is not None:
             entry["info"] = f.video_info
         feature_dict[f.key] = entry
@@ -129,12 +134,16 @@ def write_meta(
 ) -> None:
     (root / "meta").mkdir(parents=True, exist_ok=True)
     (root / INFO_PATH).write_text(json.dumps(info, indent=4))
-    task_frame = pd.DataFrame({"task_index": np.arange(len(tasks), dtype=np.int64)}, index=pd.Index(tasks, name="task"))
+    task_frame = pd.DataFrame(
+        {"task_index": np.arange(len(tasks), dtype=np.int64)}, index=pd.Index(tasks, name="task")
+    )
     task_frame.to_parquet(root / TASKS_PATH)
 
     stat_keys = [f.key for f in features] + list(DEFAULT_FEATURES)
     rows = []
-    for episode_index, (summary, placement, ep_stats) in enumerate(zip(summaries, data, episode_stats, strict=True)):
+    for episode_index, (summary, placement, ep_stats) in enumerate(
+        zip(summaries, data, episode_stats, strict=True)
+    ):
         row: dict[str, Any] = {
             "episode_index": episode_index,
             "tasks": list(summary.tasks),

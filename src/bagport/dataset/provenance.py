@@ -38,8 +38,12 @@ def write_provenance(
             with fs.open(staged, "rb") as handle:
                 table = pq.read_table(handle)
             frame_index = table.column("frame_index").to_numpy()
-            table = table.add_column(0, "index", pa.array(placement.from_index + frame_index.astype(np.int64)))
-            table = table.add_column(0, "episode_index", pa.array(np.full(table.num_rows, episode_index, np.int64)))
+            table = table.add_column(
+                0, "index", pa.array(placement.from_index + frame_index.astype(np.int64))
+            )
+            table = table.add_column(
+                0, "episode_index", pa.array(np.full(table.num_rows, episode_index, np.int64))
+            )
             if writer is None:
                 writer = pq.ParquetWriter(path, table.schema, compression="zstd")
             writer.write_table(table)

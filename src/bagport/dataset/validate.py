@@ -48,7 +48,9 @@ def validate_dataset(
     try:
         dataset = LeRobotDataset(repo_id or f"local/{path.name}", root=path)
     except Exception as err:
-        raise ValidationError(f"{path}: LeRobotDataset failed to load it: {type(err).__name__}: {err}") from err
+        raise ValidationError(
+            f"{path}: LeRobotDataset failed to load it: {type(err).__name__}: {err}"
+        ) from err
     total = len(dataset)
     if total != info["total_frames"]:
         raise ValidationError(f"{path}: LeRobot sees {total} frames, info.json says {info['total_frames']}")
@@ -64,7 +66,9 @@ def validate_dataset(
         for key in video_keys:
             frame = item[key]
             if tuple(frame.shape[-2:]) != tuple(info["features"][key]["shape"][:2]):
-                raise ValidationError(f"{path}: frame {index} of {key} decoded with shape {tuple(frame.shape)}")
+                raise ValidationError(
+                    f"{path}: frame {index} of {key} decoded with shape {tuple(frame.shape)}"
+                )
         if progress is not None:
             progress(n + 1, len(indices))
     return ValidationReport(

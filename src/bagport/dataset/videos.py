@@ -58,8 +58,10 @@ def write_video_files(
             nonlocal chunk, file, group, group_bytes
             out = root / VIDEO_PATH.format(video_key=key, chunk_index=chunk, file_index=file)
             out.parent.mkdir(parents=True, exist_ok=True)
-            for placed in concat_clips(group, out, fps=fps):
-                placements.append(VideoPlacement(chunk, file, placed.from_timestamp_s, placed.to_timestamp_s))
+            placements.extend(
+                VideoPlacement(chunk, file, placed.from_timestamp_s, placed.to_timestamp_s)
+                for placed in concat_clips(group, out, fps=fps)
+            )
             for clip in group:
                 if clip.is_relative_to(scratch):
                     clip.unlink()

@@ -11,6 +11,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
@@ -41,12 +42,16 @@ def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeatur
     reference = summaries[0]
     for summary in summaries[1:]:
         if summary.fps != reference.fps:
-            raise DatasetWriteError(f"{summary.bag_uri} was converted at {summary.fps} fps, {reference.bag_uri} at {reference.fps}")
+            raise DatasetWriteError(
+                f"{summary.bag_uri} was converted at {summary.fps} fps, {reference.bag_uri} at {reference.fps}"
+            )
         mine = {f.key: f for f in summary.features}
         for feature in reference.features:
             other = mine.get(feature.key)
             if other is None:
-                raise DatasetWriteError(f"{summary.bag_uri} has no feature {feature.key!r} but {reference.bag_uri} has")
+                raise DatasetWriteError(
+                    f"{summary.bag_uri} has no feature {feature.key!r} but {reference.bag_uri} has"
+                )
             if (other.dtype, other.shape, other.names) != (feature.dtype, feature.shape, feature.names):
                 raise DatasetWriteError(
                     f"feature {feature.key!r} differs between bags: {reference.bag_uri} gives "
@@ -62,14 +67,20 @@ def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeatur
     return reference.features
 
 
-def _task_indices(summary: EpisodeSummary, task_index: dict[str, int]) -> np.ndarray:
+def _task_indices(summary: EpisodeSummary, task_index: dict[str, int]) -> npt.NDArray[np.int64]:
     fs, path = url_to_fs(summary.file(FRAMES_FILE))
     with fs.open(path, "rb") as handle:
-        tasks = pq.read_table(handle, columns=["task"]).column("task").to_pylist()
+        tasks = [str(t) for t in pq.read_table(handle, columns=["task"]).column("task").to_pylist()]
     return np.array([task_index[t] for t in tasks], dtype=np.int64)
 
 
-def _build(root: Path, summaries: Sequence[EpisodeSummary], robot_type: str, limits: DatasetLimits, run_record: dict[str, Any]) -> DatasetReport:
+def _build(
+    root: Path,
+    summaries: Sequence[EpisodeSummary],
+    robot_type: str,
+    limits: DatasetLimits,
+    run_record: dict[str, Any],
+) -> DatasetReport:
     features = _check_consistent(summaries)
     fps = summaries[0].fps
     tasks = list(dict.fromkeys(t for s in summaries for t in s.tasks))
@@ -77,11 +88,21 @@ def _build(root: Path, summaries: Sequence[EpisodeSummary], robot_type: str, lim
     vectors = [f for f in features if f.video_info is None]
     video_keys = [f.key for f in features if f.video_info is not None]
     data = write_data_files(
-        root, summaries, vectors, task_index, file_size_in_mb=limits.data_files_size_in_mb, chunks_size=limits.chunks_size
+        root,
+        summaries,
+        vectors,
+        task_index,
+        file_size_in_mb=limits.data_files_size_in_mb,
+        chunks_size=limits.chunks_size,
     )
     videos = {
         key: write_video_files(
-            root, key, summaries, fps=fps, file_size_in_mb=limits.video_files_size_in_mb, chunks_size=limits.chunks_size
+            root,
+            key,
+            summaries,
+            fps=fps,
+            file_size_in_mb=limits.video_files_size_in_mb,
+            chunks_size=limits.chunks_size,
         )
         for key in video_keys
     }
@@ -101,7 +122,9 @@ def _build(root: Path, summaries: Sequence[EpisodeSummary], robot_type: str, lim
     write_meta(root, summaries, features, tasks, data, videos, episode_stats, info)
     write_provenance(root, summaries, data, run_record)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
-    return DatasetReport(str(root), len(summaries), total_frames, tuple(tasks), tuple(video_keys), size, total_frames / fps)
+    return DatasetReport(
+        str(root), len(summaries), total_frames, tuple(tasks), tuple(video_keys), size, total_frames / fps
+    )
 
 
 def write_dataset(
@@ -148,7 +171,15 @@ def write_dataset(
     finally:
         if not local:
             shutil.rmtree(build_root.parent, ignore_errors=True)
-    return DatasetReport(output, report.episodes, report.frames, report.tasks, report.video_keys, report.size_bytes, report.duration_s)
+    return DatasetReport(
+        output,
+        report.episodes,
+        report.frames,
+        report.tasks,
+        report.video_keys,
+        report.size_bytes,
+        report.duration_s,
+    )
 
 
 def _swap_into_place(build_root: Path, final: Path) -> None:

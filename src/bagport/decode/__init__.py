@@ -6,4 +6,11 @@ from bagport.decode.custom import CustomDecoder, resolve_decoder
 from bagport.decode.image import decode_image, resize_rgb
 from bagport.decode.vector import VectorExtractor, make_extractor
 
-__all__ = ["CustomDecoder", "VectorExtractor", "decode_image", "make_extractor", "resize_rgb", "resolve_decoder"]
+__all__ = [
+    "CustomDecoder",
+    "VectorExtractor",
+    "decode_image",
+    "make_extractor",
+    "resize_rgb",
+    "resolve_decoder",
+]

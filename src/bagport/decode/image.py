@@ -28,7 +28,13 @@ class RawEncoding:
     MONO8 = "mono8"
 
 
-_CHANNELS = {RawEncoding.RGB8: 3, RawEncoding.BGR8: 3, RawEncoding.RGBA8: 4, RawEncoding.BGRA8: 4, RawEncoding.MONO8: 1}
+_CHANNELS = {
+    RawEncoding.RGB8: 3,
+    RawEncoding.BGR8: 3,
+    RawEncoding.RGBA8: 4,
+    RawEncoding.BGRA8: 4,
+    RawEncoding.MONO8: 1,
+}
 _JPEG_MAGIC = b"\xff\xd8"
 _PNG_MAGIC = b"\x89PNG"
 
@@ -69,7 +75,7 @@ def _decode_compressed(msg: Any) -> Rgb:
             f"compressed depth images ({msg.format!r}) are not supported yet",
             fix="remove this topic from the contract for now.",
         )
-    is_jpeg = payload[:2] == _JPEG_MAGIC or ("jpeg" in fmt or "jpg" in fmt) and payload[:4] != _PNG_MAGIC
+    is_jpeg = payload[:2] == _JPEG_MAGIC or (("jpeg" in fmt or "jpg" in fmt) and payload[:4] != _PNG_MAGIC)
     try:
         if is_jpeg:
             return np.asarray(simplejpeg.decode_jpeg(payload, colorspace="RGB"), dtype=np.uint8)

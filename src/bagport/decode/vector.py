@@ -18,10 +18,10 @@ from bagport.msgtypes import RosType
 __all__ = ["VectorExtractor", "make_extractor"]
 
 _JOINT_FIELDS = ("position", "velocity", "effort")
-_SCALAR_TYPES = frozenset(
-    {RosType.FLOAT32, RosType.FLOAT64, RosType.INT32, RosType.INT64, RosType.BOOL}
+_SCALAR_TYPES = frozenset({RosType.FLOAT32, RosType.FLOAT64, RosType.INT32, RosType.INT64, RosType.BOOL})
+_ARRAY_TYPES = frozenset(
+    {RosType.FLOAT32_MULTI_ARRAY, RosType.FLOAT64_MULTI_ARRAY, "std_msgs/msg/Int32MultiArray"}
 )
-_ARRAY_TYPES = frozenset({RosType.FLOAT32_MULTI_ARRAY, RosType.FLOAT64_MULTI_ARRAY, "std_msgs/msg/Int32MultiArray"})
 _PATH_PART = re.compile(r"^([A-Za-z_]\w*)(?:\[(\d+)\])?$")
 
 Vector = npt.NDArray[np.float64]
@@ -67,9 +67,7 @@ class _JointStateExtractor:
         self._index = {}
         for field in self._fields:
             positions = [i for i, (f, _) in enumerate(self._selectors) if f == field]
-            self._index[field] = np.array(
-                [lookup[self._selectors[i][1]] for i in positions], dtype=np.intp
-            )
+            self._index[field] = np.array([lookup[self._selectors[i][1]] for i in positions], dtype=np.intp)
         self._cache_key = names
 
     def __call__(self, msg: Any) -> Vector:
@@ -109,9 +107,7 @@ def _resolve_path(msg: Any, path: str, src: SourceSpec) -> float:
             try:
                 value = value[int(index)]
             except (IndexError, TypeError) as err:
-                raise DecodeError(
-                    f"selector {path!r}: index {index} out of range", topic=src.topic
-                ) from err
+                raise DecodeError(f"selector {path!r}: index {index} out of range", topic=src.topic) from err
     try:
         return float(value)
     except (TypeError, ValueError) as err:

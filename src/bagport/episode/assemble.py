@@ -99,7 +99,7 @@ def assemble_frames(
         if not wanted:
             continue
         while next_tick < total and all(arrived[s.src.topic] > s.selection[next_tick] for s in sources):
-            on_frame(_frame(next_tick, int(ticks_ns[next_tick]), features, by_key, uri))
+            on_frame(_frame(next_tick, int(ticks_ns[next_tick]), features, by_key))
             _release(sources, next_tick)
             next_tick += 1
         if next_tick == total:
@@ -115,7 +115,7 @@ def assemble_frames(
 
 
 def _frame(
-    k: int, tick_ns: int, features: Sequence[FeatureSpec], by_key: dict[str, list[AlignedSource]], uri: str
+    k: int, tick_ns: int, features: Sequence[FeatureSpec], by_key: dict[str, list[AlignedSource]]
 ) -> Frame:
     vectors: dict[str, npt.NDArray[np.float64]] = {}
     images: dict[str, npt.NDArray[np.uint8]] = {}

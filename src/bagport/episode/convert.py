@@ -10,6 +10,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
+import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
@@ -17,6 +20,7 @@ from bagport import __version__
 from bagport.align import grid_ticks_ns, select_for_ticks
 from bagport.bags import open_bag
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
+from bagport.contract.model import StampSource
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
 from bagport.episode.checks import bag_fingerprint, check_bag_fits
 from bagport.episode.request import EpisodeRequest
@@ -41,12 +45,14 @@ from bagport.video import EncoderSettings, StreamingEncoder
 __all__ = ["convert_episode"]
 
 
-def _align(plan: ContractPlan, timeline: Timeline, uri: str) -> tuple[list[AlignedSource], np.ndarray]:
-    chosen: list[tuple[Any, str]] = []
+def _align(
+    plan: ContractPlan, timeline: Timeline, uri: str
+) -> tuple[list[AlignedSource], npt.NDArray[np.int64]]:
+    chosen: list[tuple[Any, StampSource]] = []
     for feature in plan.features:
         for src in feature.sources:
             topic = timeline.topics[src.topic]
-            stamp = src.stamp or ("header" if topic.header_ns is not None else "receive")
+            stamp: StampSource = src.stamp or ("header" if topic.header_ns is not None else "receive")
             if stamp == "header" and topic.header_ns is None:
                 raise AlignmentError(
                     f"align.stamp is 'header' for {src.key!r} but {src.topic} has no header stamps "
@@ -172,9 +178,11 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 clips = sinks.close()
             features = _staged_features(plan, sources, sinks, clips, settings)
             stats: dict[str, Any] = {}
-            table = pq.read_table(workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None])
+            table = pq.read_table(
+                workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
+            )
             for name in table.column_names:
-                stats[name] = stats_to_json(vector_stats(np.stack(table.column(name).to_numpy(zero_copy_only=False))))
+                stats[name] = stats_to_json(vector_stats(_column_matrix(table, name)))
             for key, acc in sinks.image_stats.items():
                 stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
             (workdir / STATS_FILE).write_text(json.dumps(stats))
@@ -206,6 +214,14 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     return summary
 
 
+def _column_matrix(table: pa.Table, name: str) -> npt.NDArray[np.float64]:
+    """A fixed-size-list column as a (frames, dims) array."""
+    column = table.column(name)
+    width = int(column.type.list_size)
+    flat = pc.list_flatten(column).to_numpy()
+    return np.asarray(flat, dtype=np.float64).reshape(-1, width)
+
+
 def _staged_features(
     plan: ContractPlan,
     sources: list[AlignedSource],
@@ -231,11 +247,19 @@ def _staged_features(
                 "is_depth_map": False,
             }
             shape = (clip.height, clip.width, 3)
-            out.append(StagedFeature(feature.key, "video", shape, ("height", "width", "channels"), video_info, topics))
+            out.append(
+                StagedFeature(
+                    feature.key, "video", shape, ("height", "width", "channels"), video_info, topics
+                )
+            )
             continue
         names = tuple(n for s in mine for n in (s.extractor.names if s.extractor else ()))
         width = sinks.widths[feature.key]
-        out.append(StagedFeature(feature.key, feature.dtype, (width,), names if len(names) == width else None, None, topics))
+        out.append(
+            StagedFeature(
+                feature.key, feature.dtype, (width,), names if len(names) == width else None, None, topics
+            )
+        )
     return tuple(out)
 
 

@@ -50,7 +50,7 @@ class FrameTableWriter:
         if not self._frame_index:
             return
         index = np.asarray(self._frame_index, dtype=np.int64)
-        columns: dict[str, pa.Array] = {
+        columns: dict[str, pa.Array[Any]] = {
             "timestamp": pa.array((index / self._fps).astype(np.float32)),
             "frame_index": pa.array(index),
             "task": pa.array(self._task, type=pa.string()),
@@ -59,7 +59,7 @@ class FrameTableWriter:
             stacked = np.stack(rows).astype(self._dtypes[key])
             columns[key] = pa.FixedSizeListArray.from_arrays(pa.array(stacked.ravel()), stacked.shape[1])
         batch = pa.table(columns)
-        if self._writer is None:
+        if self._writer is None or self._schema is None:
             self._schema = batch.schema
             self._writer = pq.ParquetWriter(self._path, batch.schema, compression="snappy")
         self._writer.write_table(batch.cast(self._schema))

@@ -64,7 +64,12 @@ def test_rosetta_example_loads_unchanged() -> None:
     assert action.topic == "/joint_commands"
     assert action.stamp == "receive"  # contract-level timestamp_source applies to actions
     assert plan.features[1].sources[0].resize_hw == (224, 224)
-    assert plan.topics() == ("/joint_states", "/camera/image_raw/compressed", "/joint_commands", "/task_prompt")
+    assert plan.topics() == (
+        "/joint_states",
+        "/camera/image_raw/compressed",
+        "/joint_commands",
+        "/task_prompt",
+    )
 
 
 def test_old_field_names_and_ros1_types_are_accepted() -> None:
@@ -100,7 +105,11 @@ def test_bundled_sample_contract_loads() -> None:
 @pytest.mark.parametrize(
     ("text", "match"),
     [
-        pytest.param("fps: 30\nobservations: []\n", r"c\.yaml:1 \(robot_type\): required field is missing", id="missing-robot-type"),
+        pytest.param(
+            "fps: 30\nobservations: []\n",
+            r"c\.yaml:1 \(robot_type\): required field is missing",
+            id="missing-robot-type",
+        ),
         pytest.param(
             "robot_type: r\nobservations:\n  - key: observation.state\n    topik: /js\n    type: std_msgs/msg/Float64\n",
             r"c\.yaml:4 \(observations\[0\]\.topik\): unknown field.*did you mean 'topic'",

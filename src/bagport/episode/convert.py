@@ -271,5 +271,7 @@ def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:
     fs.makedirs(path, exist_ok=True)
     for item in sorted(workdir.rglob("*")):
         if item.is_file():
-            fs.put_file(str(item), staged_path(path, item.relative_to(workdir).as_posix()))
+            remote = staged_path(path, item.relative_to(workdir).as_posix())
+            fs.makedirs(remote.rsplit("/", 1)[0], exist_ok=True)
+            fs.put_file(str(item), remote)
     write_json(staged_path(target, EPISODE_SUMMARY), summary.to_dict())

@@ -1,0 +1,68 @@
+"""Tell a bag's format from its content, not its name."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import yaml
+
+from bagport.bags.records import Storage
+from bagport.errors import BagReadError
+
+__all__ = ["detect_storage"]
+
+ROS1_MAGIC = b"#ROSBAG V2.0"
+MCAP_MAGIC = b"\x89MCAP0\r\n"
+SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _file_storage(path: Path, uri: str) -> Storage:
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(16)
+    except OSError as err:
+        raise BagReadError(f"cannot be read ({err})", uri=uri) from err
+    if not head:
+        raise BagReadError("is an empty file, not a bag", uri=uri, fix="re-copy the bag; the file has no data.")
+    if head.startswith(ROS1_MAGIC):
+        return Storage.ROS1
+    if head.startswith(MCAP_MAGIC):
+        return Storage.MCAP
+    if head.startswith(SQLITE_MAGIC):
+        return Storage.SQLITE3
+    if head.startswith(b"#ROSBAG"):
+        raise BagReadError(
+            f"is a ROS 1 bag of an unsupported version ({head[:13]!r})",
+            uri=uri,
+            fix="migrate it with `rosbag fix` to format 2.0.",
+        )
+    raise BagReadError(
+        "is not a ROS bag (no ROS 1, MCAP or SQLite signature at its start)",
+        uri=uri,
+        fix="point the manifest at a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag.",
+    )
+
+
+def detect_storage(path: Path, uri: str) -> Storage:
+    """Storage of a local bag: a rosbag2 folder (by metadata or files) or a single file (by magic)."""
+    if not path.exists():
+        raise BagReadError("does not exist", uri=uri, fix="check the manifest uri (relative to the manifest file).")
+    if path.is_file():
+        return _file_storage(path, uri)
+    metadata = path / "metadata.yaml"
+    if metadata.is_file():
+        try:
+            info = yaml.safe_load(metadata.read_text()) or {}
+            storage_id = str(info.get("rosbag2_bagfile_information", {}).get("storage_identifier", ""))
+        except (yaml.YAMLError, OSError, AttributeError) as err:
+            raise BagReadError(f"metadata.yaml is unreadable ({err})", uri=uri, fix="re-index the bag.") from err
+        if storage_id in (Storage.MCAP, Storage.SQLITE3):
+            return Storage(storage_id)
+    files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix in (".mcap", ".db3"))
+    if not files:
+        raise BagReadError(
+            "is a folder without metadata.yaml, .mcap or .db3 files",
+            uri=uri,
+            fix="point the manifest at a rosbag2 folder or at the bag file itself.",
+        )
+    return _file_storage(files[0], uri)

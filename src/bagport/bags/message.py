@@ -1,0 +1,71 @@
+"""A message read from a bag: metadata now, payload deserialised only on demand."""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from typing import Any
+
+__all__ = ["BagMessage", "HeaderLayout"]
+
+_LE = struct.Struct("<iI")
+_BE = struct.Struct(">iI")
+_ROS1 = struct.Struct("<II")
+
+
+class HeaderLayout:
+    """Where ``header.stamp`` sits in the raw bytes of a message whose first field is a Header."""
+
+    CDR = "cdr"
+    ROS1 = "ros1"
+
+
+def stamp_from_raw(raw: bytes | memoryview, layout: str) -> int | None:
+    """``header.stamp`` in ns parsed from the serialised bytes, without deserialising."""
+    if layout == HeaderLayout.CDR:
+        if len(raw) < 12:
+            return None
+        little = raw[1] == 1
+        sec, nanosec = (_LE if little else _BE).unpack_from(raw, 4)
+    else:
+        if len(raw) < 12:
+            return None
+        sec, nanosec = _ROS1.unpack_from(raw, 4)
+    return int(sec) * 1_000_000_000 + int(nanosec)
+
+
+class BagMessage:
+    __slots__ = ("_deserialize", "_layout", "_msg", "_raw", "log_time_ns", "msgtype", "topic")
+
+    def __init__(
+        self,
+        topic: str,
+        msgtype: str,
+        log_time_ns: int,
+        raw: bytes | memoryview,
+        deserialize: Callable[[bytes | memoryview, str], Any],
+        header_layout: str | None,
+    ) -> None:
+        self.topic = topic
+        self.msgtype = msgtype
+        self.log_time_ns = log_time_ns
+        self._raw = raw
+        self._deserialize = deserialize
+        self._layout = header_layout
+        self._msg: Any = None
+
+    def msg(self) -> Any:
+        """The deserialised message (a rosbags dataclass); cached."""
+        if self._msg is None:
+            self._msg = self._deserialize(self._raw, self.msgtype)
+        return self._msg
+
+    def header_stamp_ns(self) -> int | None:
+        """``header.stamp`` in ns when the type starts with a std_msgs/Header, else ``None``."""
+        if self._layout is None:
+            return None
+        return stamp_from_raw(self._raw, self._layout)
+
+    @property
+    def raw_size(self) -> int:
+        return len(self._raw)

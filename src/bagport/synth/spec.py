@@ -1,0 +1,56 @@
+"""What a synthetic episode contains: cameras, joints, actions, a task prompt."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+__all__ = ["CameraSpec", "EpisodeSpec"]
+
+CameraKind = Literal["raw", "jpeg", "png"]
+
+
+@dataclass(frozen=True, slots=True)
+class CameraSpec:
+    name: str
+    kind: CameraKind
+    encoding: str = "bgr8"
+    """Raw cameras only: rgb8, bgr8, rgba8, bgra8 or mono8."""
+    height: int = 96
+    width: int = 128
+    rate_hz: float = 30.0
+    jitter_ns: int = 2_000_000
+    latency_ns: int = 15_000_000
+    noise: float = 0.0
+    """Gaussian noise (std, in grey levels) on the colour bars, like a real sensor."""
+
+    @property
+    def topic(self) -> str:
+        return f"/{self.name}/image_raw" + ("" if self.kind == "raw" else "/compressed")
+
+    @property
+    def msgtype(self) -> str:
+        return "sensor_msgs/msg/Image" if self.kind == "raw" else "sensor_msgs/msg/CompressedImage"
+
+
+DEFAULT_CAMERAS = (CameraSpec("front", "raw", "bgr8"), CameraSpec("wrist", "jpeg"))
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeSpec:
+    duration_s: float = 3.0
+    start_ns: int = 1_700_000_000_000_000_000
+    joint_names: tuple[str, ...] = ("j1", "j2", "j3", "j4", "j5", "j6")
+    joint_rate_hz: float = 100.0
+    joint_latency_ns: int = 2_000_000
+    action_rate_hz: float = 50.0
+    action_latency_ns: int = 1_000_000
+    action_lead_s: float = 0.1
+    """The action commands the position ``action_lead_s`` ahead of its stamp."""
+    cameras: tuple[CameraSpec, ...] = DEFAULT_CAMERAS
+    task: str | None = "pick up the red cube"
+    seed: int = 0
+
+    JOINT_TOPIC = "/joint_states"
+    ACTION_TOPIC = "/cmd"
+    TASK_TOPIC = "/task_prompt"

@@ -1,0 +1,204 @@
+"""Write synthetic episodes as rosbag2 (MCAP, SQLite) or ROS 1 bags with rosbags' writers."""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import numpy.typing as npt
+import simplejpeg
+import yaml
+from PIL import Image as PILImage
+from rosbags.rosbag1 import Writer as Ros1Writer
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Ros2Writer
+from rosbags.typesys import Stores, get_typestore
+
+from bagport.synth.pixels import render_frame
+from bagport.synth.spec import CameraSpec, EpisodeSpec
+from bagport.synth.truth import GroundTruth
+
+__all__ = ["SynthStorage", "write_episode_bag", "write_sample_fleet"]
+
+SynthStorage = Literal["mcap", "sqlite3", "ros1"]
+NS = 1_000_000_000
+OPERATOR_PROMPT_KEY = "lerobot.operator_prompt"
+
+
+class _Messages:
+    """Builds messages with the right type store (ROS 1 headers carry ``seq``)."""
+
+    def __init__(self, ros1: bool) -> None:
+        self.store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+        self.ros1 = ros1
+        self.serialize: Callable[[Any, str], bytes | memoryview] = (
+            self.store.serialize_ros1 if ros1 else self.store.serialize_cdr
+        )
+        types = self.store.types
+        self._time = types["builtin_interfaces/msg/Time"]
+        self._header = types["std_msgs/msg/Header"]
+        self.joint_state = types["sensor_msgs/msg/JointState"]
+        self.image = types["sensor_msgs/msg/Image"]
+        self.compressed = types["sensor_msgs/msg/CompressedImage"]
+        self.string = types["std_msgs/msg/String"]
+
+    def header(self, stamp_ns: int, seq: int, frame_id: str) -> Any:
+        stamp = self._time(sec=stamp_ns // NS, nanosec=stamp_ns % NS)
+        if self.ros1:
+            return self._header(seq=seq, stamp=stamp, frame_id=frame_id)
+        return self._header(stamp=stamp, frame_id=frame_id)
+
+
+def _raw_bytes(rgb: npt.NDArray[np.uint8], encoding: str) -> tuple[npt.NDArray[np.uint8], int]:
+    if encoding == "rgb8":
+        out = rgb
+    elif encoding == "bgr8":
+        out = rgb[:, :, ::-1]
+    elif encoding in ("rgba8", "bgra8"):
+        colour = rgb if encoding == "rgba8" else rgb[:, :, ::-1]
+        out = np.concatenate([colour, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+    elif encoding == "mono8":
+        out = rgb.mean(axis=2, keepdims=True).astype(np.uint8)
+    else:
+        raise ValueError(f"synthetic raw encoding {encoding!r} is not supported")
+    return np.ascontiguousarray(out).ravel(), out.shape[1] * out.shape[2]
+
+
+def _camera_message(msgs: _Messages, cam: CameraSpec, k: int, stamp_ns: int, rng: np.random.Generator) -> Any:
+    rgb = render_frame(cam.height, cam.width, k, rng, cam.noise)
+    header = msgs.header(stamp_ns, k, cam.name)
+    if cam.kind == "raw":
+        data, step = _raw_bytes(rgb, cam.encoding)
+        return msgs.image(
+            header=header, height=cam.height, width=cam.width, encoding=cam.encoding, is_bigendian=0, step=step, data=data
+        )
+    if cam.kind == "jpeg":
+        payload = simplejpeg.encode_jpeg(rgb, quality=90, colorspace="RGB")
+        fmt = "rgb8; jpeg compressed bgr8"
+    else:
+        buf = io.BytesIO()
+        PILImage.fromarray(rgb).save(buf, format="PNG")
+        payload, fmt = buf.getvalue(), "png"
+    return msgs.compressed(header=header, format=fmt, data=np.frombuffer(payload, dtype=np.uint8))
+
+
+def _joint_message(msgs: _Messages, truth: GroundTruth, k: int, stamp_ns: int) -> Any:
+    names = list(truth.spec.joint_names)
+    pos, vel, eff = truth.joint_position(stamp_ns), truth.joint_velocity(stamp_ns), truth.joint_effort(stamp_ns)
+    if k % 2:  # the order of names differs between messages: consumers must select by name
+        names, pos, vel, eff = names[::-1], pos[::-1], vel[::-1], eff[::-1]
+    return msgs.joint_state(
+        header=msgs.header(stamp_ns, k, "base"),
+        name=names,
+        position=np.ascontiguousarray(pos, dtype=np.float64),
+        velocity=np.ascontiguousarray(vel, dtype=np.float64),
+        effort=np.ascontiguousarray(eff, dtype=np.float64),
+    )
+
+
+def _action_message(msgs: _Messages, truth: GroundTruth, k: int, stamp_ns: int) -> Any:
+    return msgs.joint_state(
+        header=msgs.header(stamp_ns, k, "base"),
+        name=list(truth.spec.joint_names),
+        position=np.ascontiguousarray(truth.action_position(stamp_ns), dtype=np.float64),
+        velocity=np.zeros(0, dtype=np.float64),
+        effort=np.zeros(0, dtype=np.float64),
+    )
+
+
+def _events(truth: GroundTruth) -> Iterator[tuple[int, str, int, int]]:
+    """(log_ns, topic, index, stamp_ns) for every message, in log-time order."""
+    spec = truth.spec
+    events: list[tuple[int, str, int, int]] = []
+    for k, stamp in enumerate(truth.joint_stamps_ns().tolist()):
+        events.append((stamp + spec.joint_latency_ns, spec.JOINT_TOPIC, k, stamp))
+    for k, stamp in enumerate(truth.action_stamps_ns().tolist()):
+        events.append((stamp + spec.action_latency_ns, spec.ACTION_TOPIC, k, stamp))
+    for cam in spec.cameras:
+        for k, stamp in enumerate(truth.camera_stamps_ns(cam.name).tolist()):
+            events.append((stamp + cam.latency_ns, cam.topic, k, stamp))
+    if spec.task is not None:
+        events.append((truth.task_stamp_ns, spec.TASK_TOPIC, 0, truth.task_stamp_ns))
+    events.sort()
+    return iter(events)
+
+
+def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> GroundTruth:
+    """Write one episode; mcap/sqlite3 make a rosbag2 folder at ``path``, ros1 a ``.bag`` file."""
+    truth = GroundTruth(spec)
+    msgs = _Messages(ros1=storage == "ros1")
+    cameras = {cam.topic: cam for cam in spec.cameras}
+    types = {spec.JOINT_TOPIC: "sensor_msgs/msg/JointState", spec.ACTION_TOPIC: "sensor_msgs/msg/JointState"}
+    types.update({cam.topic: cam.msgtype for cam in spec.cameras})
+    if spec.task is not None:
+        types[spec.TASK_TOPIC] = "std_msgs/msg/String"
+    rng = np.random.default_rng(spec.seed + 1)
+    writer: Any
+    if storage == "ros1":
+        writer = Ros1Writer(path)
+    else:
+        plugin = StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3
+        writer = Ros2Writer(path, version=9, storage_plugin=plugin)
+    writer.open()
+    try:
+        conns = {topic: writer.add_connection(topic, msgtype, typestore=msgs.store) for topic, msgtype in types.items()}
+        if storage != "ros1" and spec.task is not None:
+            writer.set_custom_data(OPERATOR_PROMPT_KEY, spec.task)
+        for log_ns, topic, k, stamp in _events(truth):
+            if topic == spec.JOINT_TOPIC:
+                msg = _joint_message(msgs, truth, k, stamp)
+            elif topic == spec.ACTION_TOPIC:
+                msg = _action_message(msgs, truth, k, stamp)
+            elif topic == spec.TASK_TOPIC:
+                msg = msgs.string(data=spec.task)
+            else:
+                msg = _camera_message(msgs, cameras[topic], k, stamp, rng)
+            writer.write(conns[topic], log_ns, msgs.serialize(msg, types[topic]))
+    finally:
+        writer.close()
+    return truth
+
+
+_STORAGES: tuple[SynthStorage, ...] = ("mcap", "sqlite3", "ros1")
+_TASKS = ("pick up the red cube", "place the cube in the bin")
+
+
+def write_sample_fleet(
+    out_dir: Path,
+    *,
+    episodes: int = 4,
+    duration_s: float = 3.0,
+    seed: int = 0,
+    cameras: tuple[CameraSpec, ...] | None = None,
+) -> list[Path]:
+    """A small fleet cycling MCAP folder, SQLite folder and ROS 1 .bag, plus ``manifest.yaml``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = []
+    entries = []
+    for index in range(episodes):
+        storage = _STORAGES[index % len(_STORAGES)]
+        name = f"episode_{index:03d}" + (".bag" if storage == "ros1" else "")
+        path = out_dir / name
+        if path.exists():
+            raise FileExistsError(f"{path} exists; choose an empty --out folder")
+        spec = EpisodeSpec(
+            duration_s=duration_s,
+            start_ns=1_700_000_000_000_000_000 + index * 3_600 * NS,
+            seed=seed + index,
+            task=_TASKS[index % len(_TASKS)],
+        )
+        if cameras is not None:
+            spec = replace(spec, cameras=cameras)
+        write_episode_bag(path, storage, spec)
+        paths.append(path)
+        entries.append({"uri": name, "metadata": {"storage": storage, "seed": seed + index}})
+    manifest = {"bags": entries}
+    (out_dir / "manifest.yaml").write_text(
+        "# Written by `bagport synth`: one bag per episode, paths relative to this file.\n"
+        + yaml.safe_dump(manifest, sort_keys=False)
+    )
+    return paths

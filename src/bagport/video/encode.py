@@ -1,0 +1,110 @@
+"""Encode RGB frames to an MP4 clip as they arrive: pts = frame index, constant frame rate."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+from types import TracebackType
+from typing import Any
+
+import av
+import numpy as np
+import numpy.typing as npt
+
+from bagport.errors import VideoError
+from bagport.video.settings import EncoderSettings
+
+__all__ = ["ClipInfo", "StreamingEncoder"]
+
+
+@dataclass(frozen=True, slots=True)
+class ClipInfo:
+    path: str
+    frames: int
+    fps: int
+    width: int
+    height: int
+    codec: str
+    pix_fmt: str
+    size_bytes: int
+
+
+class StreamingEncoder:
+    """One clip; memory does not grow with the number of frames."""
+
+    def __init__(self, path: str | Path, *, fps: int, width: int, height: int, settings: EncoderSettings) -> None:
+        if settings.pix_fmt.startswith("yuv420") and (width % 2 or height % 2):
+            raise VideoError(
+                f"{path}: {width}x{height} frames cannot be encoded as {settings.pix_fmt} (needs even width and "
+                "height). Fix: set 'image: {resize: [h, w]}' with even numbers for this camera in the contract."
+            )
+        self._path = Path(path)
+        self._fps = fps
+        self._shape = (height, width, 3)
+        self._settings = settings
+        try:
+            self._container: Any = av.open(str(self._path), mode="w")
+            stream = self._container.add_stream(settings.codec, rate=fps, options=settings.codec_options())
+        except (av.error.FFmpegError, ValueError) as err:
+            raise VideoError(
+                f"{path}: cannot start encoder {settings.codec!r} ({err}). Fix: pick a codec this PyAV build has "
+                "(libsvtav1, libx264) in the codec preset."
+            ) from err
+        stream.width = width
+        stream.height = height
+        stream.pix_fmt = settings.pix_fmt
+        stream.time_base = Fraction(1, fps)
+        self._stream: Any = stream
+        self._frames = 0
+        self._closed: ClipInfo | None = None
+
+    def write(self, rgb: npt.NDArray[np.uint8]) -> None:
+        if rgb.shape != self._shape or rgb.dtype != np.uint8:
+            raise VideoError(
+                f"{self._path}: frame {self._frames} is {rgb.dtype}{list(rgb.shape)}, the clip is uint8"
+                f"{list(self._shape)}. Fix: set 'image: {{resize: [h, w]}}' so every frame has one size."
+            )
+        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+        frame.pts = self._frames
+        frame.time_base = Fraction(1, self._fps)
+        try:
+            for packet in self._stream.encode(frame):
+                self._container.mux(packet)
+        except av.error.FFmpegError as err:
+            raise VideoError(f"{self._path}: encoding frame {self._frames} failed: {err}") from err
+        self._frames += 1
+
+    def close(self) -> ClipInfo:
+        if self._closed is not None:
+            return self._closed
+        try:
+            for packet in self._stream.encode(None):
+                self._container.mux(packet)
+        finally:
+            self._container.close()
+        self._closed = ClipInfo(
+            path=str(self._path),
+            frames=self._frames,
+            fps=self._fps,
+            width=self._shape[1],
+            height=self._shape[0],
+            codec=_stream_codec_name(self._path),
+            pix_fmt=self._settings.pix_fmt,
+            size_bytes=self._path.stat().st_size,
+        )
+        return self._closed
+
+    def __enter__(self) -> StreamingEncoder:
+        return self
+
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        self.close()
+
+
+def _stream_codec_name(path: Path) -> str:
+    """The stream's codec as decoders name it (``av1``, ``h264``), as LeRobot records it."""
+    with av.open(str(path)) as container:
+        return str(container.streams.video[0].codec.canonical_name)

@@ -1,0 +1,79 @@
+"""Encoder settings, defaulting to LeRobot's (libsvtav1, yuv420p, g=2, crf=30, preset=12)."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+from bagport.errors import VideoError
+
+__all__ = ["EncoderSettings"]
+
+_SVTAV1 = "libsvtav1"
+
+
+@dataclass(frozen=True, slots=True)
+class EncoderSettings:
+    codec: str = _SVTAV1
+    pix_fmt: str = "yuv420p"
+    g: int | None = 2
+    crf: int | None = 30
+    preset: int | str | None = 12
+    fast_decode: int = 0
+    threads: int | None = None
+    extra_options: Mapping[str, str] = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> EncoderSettings:
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise VideoError(
+                f"unknown encoder setting(s) {unknown}; known: {sorted(known)}. "
+                "Fix: correct the codec preset (configs/codecs/*.yaml)."
+            )
+        values = dict(data)
+        if "extra_options" in values:
+            values["extra_options"] = {str(k): str(v) for k, v in dict(values["extra_options"] or {}).items()}
+        if values.get("codec", _SVTAV1) != _SVTAV1 and "preset" not in values:
+            values["preset"] = None
+        settings = cls(**values)
+        if settings.g is not None and settings.g < 1:
+            raise VideoError(f"encoder setting g={settings.g} must be >= 1")
+        return settings
+
+    def codec_options(self) -> dict[str, str]:
+        """Options for ``av`` ``add_stream``, the way LeRobot 0.6 builds them."""
+        opts: dict[str, str] = {}
+        if self.g is not None:
+            opts["g"] = str(self.g)
+        if self.crf is not None:
+            opts["crf"] = str(self.crf)
+        if self.preset is not None:
+            opts["preset"] = str(self.preset)
+        if self.codec == _SVTAV1:
+            parts = [f"fast-decode={max(0, min(2, self.fast_decode))}"] if self.fast_decode else []
+            if self.threads is not None:
+                parts.append(f"lp={self.threads}")
+            if parts:
+                opts["svtav1-params"] = ":".join(parts)
+        else:
+            if self.fast_decode:
+                opts["tune"] = "fastdecode"
+            if self.threads is not None:
+                opts["threads"] = str(self.threads)
+        for key, value in self.extra_options.items():
+            opts.setdefault(key, value)
+        return opts
+
+    def to_info(self) -> dict[str, Any]:
+        """The encoder keys LeRobot 0.6 records in ``features[key]["info"]``."""
+        return {
+            "video.g": self.g,
+            "video.crf": self.crf,
+            "video.preset": self.preset,
+            "video.fast_decode": self.fast_decode,
+            "video.video_backend": "pyav",
+            "video.extra_options": dict(self.extra_options),
+        }

@@ -1,0 +1,127 @@
+"""One bag -> one staged episode, checked against the synthetic ground truth."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.errors import AlignmentError, ContractError, ManifestError
+from bagport.staging import read_summary
+from bagport.synth import CameraSpec, EpisodeSpec, bar_means, decode_frame_index, expected_bar_colours, write_episode_bag
+from bagport.video import iter_frames
+from tests.helpers import SAMPLE_CONTRACT
+
+FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+
+
+def _request(bag: Path, staging: Path, contract_text: str | None = None, task: str | None = None) -> EpisodeRequest:
+    text = contract_text if contract_text is not None else SAMPLE_CONTRACT.read_text()
+    return EpisodeRequest(
+        episode_id=episode_id_for(str(bag), text, FAST),
+        bag_uri=str(bag),
+        manifest_entry=0,
+        staging_uri=str(staging),
+        contract_text=text,
+        contract_name="contract.yaml",
+        encoder=FAST,
+        default_task=task,
+    )
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3", "ros1"])
+def test_episode_matches_ground_truth(tmp_path: Path, storage: str) -> None:
+    spec = EpisodeSpec(duration_s=2.0, seed=3)
+    bag = tmp_path / ("ep.bag" if storage == "ros1" else "ep")
+    truth = write_episode_bag(bag, storage, spec)  # type: ignore[arg-type]
+    summary = convert_episode(_request(bag, tmp_path / "staging"))
+    assert read_summary(summary.dir_uri) == summary
+
+    frames = pq.read_table(Path(summary.dir_uri) / "frames.parquet")
+    prov = pq.read_table(Path(summary.dir_uri) / "provenance.parquet").to_pylist()
+    n = frames.num_rows
+    assert n == summary.frames
+    # The grid starts when every stream has data and ends at the earliest last message.
+    cams = [truth.camera_stamps_ns(c.name) for c in spec.cameras]
+    starts = [truth.joint_stamps_ns()[0], truth.action_stamps_ns()[0], *(c[0] for c in cams)]
+    ends = [truth.joint_stamps_ns()[-1], truth.action_stamps_ns()[-1], *(c[-1] for c in cams)]
+    assert summary.first_tick_ns == max(starts)
+    assert summary.last_tick_ns <= min(ends) < summary.last_tick_ns + 1_000_000_000 // 30 + 1
+    ticks = summary.first_tick_ns + (np.arange(n) * 1_000_000_000) // 30
+    np.testing.assert_array_equal(frames.column("frame_index").to_numpy(), np.arange(n))
+    np.testing.assert_allclose(frames.column("timestamp").to_numpy(), np.arange(n) / 30, atol=1e-6)
+
+    # State: each frame holds the latest joint message at or before its tick (header stamps), by joint name.
+    state = np.stack(frames.column("observation.state").to_numpy(zero_copy_only=False))
+    joint_stamps = truth.joint_stamps_ns()
+    latest = joint_stamps[np.searchsorted(joint_stamps, ticks, side="right") - 1]
+    np.testing.assert_allclose(state, truth.joint_position(latest), atol=1e-6)
+    action = np.stack(frames.column("action").to_numpy(zero_copy_only=False))
+    action_stamps = truth.action_stamps_ns()
+    latest_action = action_stamps[np.searchsorted(action_stamps, ticks, side="right") - 1]
+    np.testing.assert_allclose(action, truth.action_position(latest_action), atol=1e-6)
+
+    # Provenance names the message behind every value, with both clocks.
+    state_rows = [r for r in prov if r["key"] == "observation.state"]
+    assert [r["source_header_ns"] for r in state_rows] == latest.tolist()
+    assert all(r["stamp_used"] == "header" for r in state_rows)
+    assert all(r["source_log_ns"] - r["source_header_ns"] == spec.joint_latency_ns for r in state_rows)
+
+    # Images: the right camera frame (decoded from the pixels) and the right colours (catches BGR/RGB swaps).
+    for cam in spec.cameras:
+        stamps = truth.camera_stamps_ns(cam.name)
+        expected_index = np.searchsorted(stamps, ticks, side="right") - 1
+        decoded = list(iter_frames(Path(summary.dir_uri) / f"videos/observation.images.{cam.name}.mp4"))
+        assert len(decoded) == n
+        for k, (pts_s, rgb) in enumerate(decoded):
+            assert abs(pts_s - k / 30) < 1e-4
+            assert decode_frame_index(rgb) == expected_index[k] % 1024
+            np.testing.assert_allclose(bar_means(rgb), expected_bar_colours(), atol=20)
+
+    stats = json.loads((Path(summary.dir_uri) / "stats.json").read_text())
+    np.testing.assert_allclose(stats["observation.state"]["mean"], state.astype(np.float64).mean(axis=0), rtol=1e-6)
+    assert np.asarray(stats["observation.images.front"]["mean"]).shape == (3, 1, 1)
+    assert summary.tasks == (spec.task,)
+    assert summary.task_source == "topic"
+
+
+def test_missing_topic_names_the_bag_and_lists_what_it_has(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5))
+    text = SAMPLE_CONTRACT.read_text().replace("/wrist/image_raw/compressed", "/wrist/nope")
+    with pytest.raises(ContractError, match=r"topic /wrist/nope .* is not in bag .*; the bag has: .*/joint_states"):
+        convert_episode(_request(bag, tmp_path / "staging", text))
+    assert not (tmp_path / "staging").exists()
+
+
+def test_no_task_anywhere_is_an_error_and_manifest_task_is_the_fallback(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5, task=None))
+    text = SAMPLE_CONTRACT.read_text().split("tasks:")[0]
+    with pytest.raises(ManifestError, match="has no task prompt.*add 'task: ...'"):
+        convert_episode(_request(bag, tmp_path / "staging", text))
+    summary = convert_episode(_request(bag, tmp_path / "staging", text, task="stack blocks"))
+    assert summary.tasks == ("stack blocks",)
+    assert summary.task_source == "manifest"
+
+
+def test_asof_gap_is_an_explicit_error(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5, cameras=(CameraSpec("front", "raw", rate_hz=5.0),)))
+    text = """\
+robot_type: r
+fps: 30
+observations:
+  - key: observation.images.front
+    topic: /front/image_raw
+    type: sensor_msgs/msg/Image
+    align: {strategy: asof, tol_ms: 50}
+tasks:
+  - {key: task, topic: /task_prompt}
+"""
+    with pytest.raises(AlignmentError, match=r"frames have no 'observation.images.front' message .* raise align.tol_ms"):
+        convert_episode(_request(bag, tmp_path / "staging", text))

@@ -3,15 +3,21 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from prefect import flow, get_run_logger
+from prefect.events.worker import EventsWorker
 from prefect.futures import wait
+from prefect.logging.handlers import APILogWorker
+from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
 from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
 
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.errors import BagportError
+from bagport.run import plan_run
 from tasks.episode import convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
@@ -58,6 +64,36 @@ def convert_flow(config: ConvertConfig) -> DatasetReport:
     return reduce_task(plan, staged)
 
 
+@contextmanager
+def prefect_api() -> Iterator[None]:
+    """Use the configured Prefect API, else one temporary local server shared by every worker.
+
+    Without this, each process-pool worker would start a temporary server of its own
+    (15-20 s each here), because Prefect does not pass its ephemeral server's URL on.
+    """
+    if get_current_settings().api.url:
+        yield
+        return
+    from prefect.server.api.server import SubprocessASGIServer  # noqa: PLC0415 - only without a server
+
+    server = SubprocessASGIServer()
+    server.start(timeout=get_current_settings().server.ephemeral.startup_timeout_seconds)
+    previous = os.environ.get("PREFECT_API_URL")
+    os.environ["PREFECT_API_URL"] = server.api_url
+    try:
+        with temporary_settings({PREFECT_API_URL: server.api_url}):
+            yield
+            # Deliver queued logs and events while the server still listens.
+            APILogWorker.drain_all(timeout=10)
+            EventsWorker.drain_all(timeout=10)
+    finally:
+        if previous is None:
+            os.environ.pop("PREFECT_API_URL", None)
+        else:
+            os.environ["PREFECT_API_URL"] = previous
+        server.stop()
+
+
 def run_convert(config: ConvertConfig) -> DatasetReport:
     """Run the flow with the task runner the config asks for."""
     workers = config.workers or os.cpu_count() or 1
@@ -66,6 +102,8 @@ def run_convert(config: ConvertConfig) -> DatasetReport:
         runner = ProcessPoolTaskRunner(max_workers=workers)
     else:
         runner = ThreadPoolTaskRunner(max_workers=workers)
-    # Prefect types task_runner as TaskRunner[PrefectFuture]; both runners are, but not in its stubs.
-    result: DatasetReport = convert_flow.with_options(task_runner=runner)(config)  # type: ignore[arg-type]
+    plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
+    with prefect_api():
+        # Prefect types task_runner as TaskRunner[PrefectFuture]; both runners are, but not in its stubs.
+        result: DatasetReport = convert_flow.with_options(task_runner=runner)(config)  # type: ignore[arg-type]
     return result

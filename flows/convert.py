@@ -8,10 +8,12 @@ from contextlib import contextmanager
 from typing import Any
 
 from prefect import flow, get_run_logger
+from prefect.client.schemas.objects import State
 from prefect.events.worker import EventsWorker
 from prefect.futures import wait
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
+from prefect.states import Failed
 from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
 
 from bagport.config import ConvertConfig
@@ -34,7 +36,7 @@ def _label(uri: str) -> str:
 
 
 @flow(name="bagport-convert", flow_run_name="convert {config.output}", validate_parameters=True)
-def convert_flow(config: ConvertConfig) -> DatasetReport:
+def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
     plan = plan_task(config)
     futures = [
@@ -45,23 +47,26 @@ def convert_flow(config: ConvertConfig) -> DatasetReport:
     staged: list[dict[str, Any]] = []
     failures: list[str] = []
     for request, future in zip(plan.requests, futures, strict=True):
-        try:
+        state = future.state
+        if state.is_completed():
             staged.append(future.result())
-        except BagportError as err:
-            failures.append(f"- bags[{request.manifest_entry}] {request.bag_uri}: {err}")
-        except Exception as err:  # an unexpected bug: still report which bag, never lose the others
-            failures.append(
-                f"- bags[{request.manifest_entry}] {request.bag_uri}: unexpected {type(err).__name__}: {err}"
-            )
+            continue
+        # A bad bag's task ends Failed with bagport's one-paragraph error as its message.
+        failures.append(f"- bags[{request.manifest_entry}] {request.bag_uri}: {state.message or state.name}")
     if failures:
-        done = len(staged)
-        raise ConversionError(
+        message = (
             f"{len(failures)} of {len(plan.requests)} bag(s) failed; nothing was written at {config.output} "
-            f"({done} converted episode(s) are kept in the staging store {config.resolved_staging()}).\n"
+            f"({len(staged)} converted episode(s) are kept in the staging store {config.resolved_staging()}).\n"
             + "\n".join(failures)
         )
+        logger.error(message)
+        return Failed(message=message)
     logger.info("all %d episode(s) staged; writing the dataset", len(staged))
-    return reduce_task(plan, staged)
+    reduced = reduce_task(plan, staged, return_state=True)
+    if not reduced.is_completed():
+        return Failed(message=reduced.message or "writing the dataset failed")
+    report: DatasetReport = reduced.result()
+    return report
 
 
 @contextmanager
@@ -82,10 +87,12 @@ def prefect_api() -> Iterator[None]:
     os.environ["PREFECT_API_URL"] = server.api_url
     try:
         with temporary_settings({PREFECT_API_URL: server.api_url}):
-            yield
-            # Deliver queued logs and events while the server still listens.
-            APILogWorker.drain_all(timeout=10)
-            EventsWorker.drain_all(timeout=10)
+            try:
+                yield
+            finally:
+                # Deliver queued logs and events while the server still listens.
+                APILogWorker.drain_all(timeout=10)
+                EventsWorker.drain_all(timeout=10)
     finally:
         if previous is None:
             os.environ.pop("PREFECT_API_URL", None)
@@ -105,5 +112,10 @@ def run_convert(config: ConvertConfig) -> DatasetReport:
     plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
     with prefect_api():
         # Prefect types task_runner as TaskRunner[PrefectFuture]; both runners are, but not in its stubs.
-        result: DatasetReport = convert_flow.with_options(task_runner=runner)(config)  # type: ignore[arg-type]
+        flow_with_runner = convert_flow.with_options(task_runner=runner)  # type: ignore[arg-type]
+        state = flow_with_runner(config, return_state=True)
+    if not state.is_completed():
+        # bagport's own errors arrive as the state message; anything else is a bug worth its traceback
+        raise ConversionError(state.message or f"the conversion flow ended {state.name}")
+    result: DatasetReport = state.result()
     return result

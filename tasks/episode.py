@@ -6,9 +6,10 @@ from typing import Any
 
 from prefect import Task, get_run_logger, task
 from prefect.client.schemas.objects import State, TaskRun
+from prefect.states import Failed
 
 from bagport.episode import EpisodeRequest, convert_episode
-from bagport.errors import TransientError
+from bagport.errors import BagportError, TransientError
 
 __all__ = ["convert_episode_task", "retry_only_transient"]
 
@@ -32,10 +33,20 @@ def retry_only_transient(_task: Task[Any, Any], _run: TaskRun, state: State[Any]
     retry_condition_fn=retry_only_transient,
     tags=["bagport", "episode"],
 )
-def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any]:
-    """Returns the staged episode's folder URI and a small summary, never arrays."""
+def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any] | State[Any]:
+    """Returns the staged episode's folder URI and a small summary, never arrays.
+
+    A bad bag ends the task run in a Failed state whose message is bagport's one-paragraph
+    error (no traceback in the logs); transient I/O errors raise, so Prefect retries them.
+    """
     episode = EpisodeRequest(**request)
-    summary = convert_episode(episode)
+    try:
+        summary = convert_episode(episode)
+    except TransientError:
+        raise
+    except BagportError as err:
+        get_run_logger().error("%s: %s", label, err)
+        return Failed(message=str(err))
     get_run_logger().info("%s: %d frames staged at %s", label, summary.frames, summary.dir_uri)
     return {
         "episode_id": summary.episode_id,

@@ -5,15 +5,23 @@ from __future__ import annotations
 from typing import Any
 
 from prefect import get_run_logger, task
+from prefect.client.schemas.objects import State
+from prefect.states import Failed
 
 from bagport.dataset import DatasetReport
+from bagport.errors import BagportError
 from bagport.run import RunPlan, reduce_run
 
 __all__ = ["reduce_task"]
 
 
 @task(name="write-dataset")
-def reduce_task(plan: RunPlan, staged: list[dict[str, Any]]) -> DatasetReport:
-    report = reduce_run(plan, [item["dir_uri"] for item in staged])
+def reduce_task(plan: RunPlan, staged: list[dict[str, Any]]) -> DatasetReport | State[Any]:
+    """Ends Failed with bagport's one-paragraph error as the message when the dataset cannot be written."""
+    try:
+        report = reduce_run(plan, [item["dir_uri"] for item in staged])
+    except BagportError as err:
+        get_run_logger().error("%s", err)
+        return Failed(message=str(err))
     get_run_logger().info("wrote %d episode(s), %d frames to %s", report.episodes, report.frames, report.root)
     return report

@@ -10,6 +10,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from bagport.dataset.validate import video_backend
 from bagport.synth import EpisodeSpec, GroundTruth, bar_means, decode_frame_index, expected_bar_colours
 from flows.cli import main
 from tests.helpers import SAMPLE_CONTRACT
@@ -59,7 +60,7 @@ def test_lerobot_loads_every_frame_with_true_values_and_colours(converted: tuple
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
 
     _, out = converted
-    dataset = LeRobotDataset("test/sample", root=out, video_backend="pyav")
+    dataset = LeRobotDataset("test/sample", root=out, video_backend=video_backend())
     run = json.loads((out / "meta/provenance/run.json").read_text())
     assert dataset.meta.total_episodes == EPISODES
     assert [e["storage"] for e in run["episodes"]] == ["mcap", "sqlite3", "ros1", "mcap"]

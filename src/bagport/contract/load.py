@@ -68,7 +68,7 @@ def _from_validation(err: pydantic.ValidationError, source: YamlSource) -> Contr
     first = primary_error(err)
     loc = tuple(first["loc"])
     field = ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in loc).replace(".[", "[")
-    msg = first["msg"]
+    msg = first["msg"].removeprefix("Value error, ")
     if first["type"] == "missing":
         msg = "required field is missing"
     elif first["type"] == "extra_forbidden":

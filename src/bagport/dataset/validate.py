@@ -10,7 +10,7 @@ from pathlib import Path
 from bagport.dataset.invariants import check_invariants
 from bagport.errors import ValidationError
 
-__all__ = ["ValidationReport", "validate_dataset"]
+__all__ = ["ValidationReport", "validate_dataset", "video_backend"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,7 +46,7 @@ def validate_dataset(
             "Fix: install bagport with the 'lerobot' extra (the README's set-up command does)."
         ) from err
     try:
-        dataset = LeRobotDataset(repo_id or f"local/{path.name}", root=path)
+        dataset = LeRobotDataset(repo_id or f"local/{path.name}", root=path, video_backend=video_backend())
     except Exception as err:
         raise ValidationError(
             f"{path}: LeRobotDataset failed to load it: {type(err).__name__}: {err}"
@@ -74,6 +74,30 @@ def validate_dataset(
     return ValidationReport(
         str(path), dataset.meta.total_episodes, total, len(indices), video_keys, str(dataset._video_backend)
     )
+
+
+def video_backend() -> str:
+    """LeRobot's default decoder (torchcodec) when it loads on this machine, else PyAV.
+
+    torchcodec needs FFmpeg's shared libraries; without them LeRobot falls back to PyAV
+    after printing a long traceback.  Decide quietly instead.
+    """
+    import contextlib  # noqa: PLC0415
+    import importlib  # noqa: PLC0415
+    import io  # noqa: PLC0415
+    import logging  # noqa: PLC0415
+
+    sink = io.StringIO()
+    previous = logging.root.manager.disable
+    logging.disable(logging.CRITICAL)
+    try:
+        with contextlib.redirect_stderr(sink), contextlib.redirect_stdout(sink):
+            importlib.import_module("torchcodec.decoders")
+    except (ImportError, OSError, RuntimeError):
+        return "pyav"
+    finally:
+        logging.disable(previous)
+    return "torchcodec"
 
 
 def _indices(dataset: object, every: int) -> list[int]:

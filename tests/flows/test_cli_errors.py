@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import main
-from tests.helpers import SAMPLE_CONTRACT
+from tests.helpers import REPO, SAMPLE_CONTRACT
 
 
-def _run(argv: list[str], capsys: pytest.CaptureFixture[str]) -> tuple[int, str]:
+def _run(argv: list[str], capfd: pytest.CaptureFixture[str]) -> tuple[int, str]:
     code = main(argv)
-    captured = capsys.readouterr()
+    captured = capfd.readouterr()
     assert "Traceback" not in captured.err
     return code, captured.err
 
@@ -22,10 +24,10 @@ def _convert(manifest: Path, contract: Path, out: Path) -> list[str]:
     return ["convert", "--manifest", str(manifest), "--contract", str(contract), "--output", str(out)]
 
 
-def test_missing_bag_uri(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_missing_bag_uri(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     manifest = tmp_path / "m.yaml"
     manifest.write_text("bags:\n  - uri: no_such_bag\n")
-    code, err = _run(_convert(manifest, SAMPLE_CONTRACT, tmp_path / "out"), capsys)
+    code, err = _run(_convert(manifest, SAMPLE_CONTRACT, tmp_path / "out"), capfd)
     assert code == 2
     assert "m.yaml, bags[0]: bag" in err
     assert "no_such_bag' does not exist" in err
@@ -33,27 +35,29 @@ def test_missing_bag_uri(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> 
     assert not (tmp_path / "out").exists()
 
 
-def test_malformed_contract(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_malformed_contract(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=0.3))
     manifest = tmp_path / "m.yaml"
     manifest.write_text("bags:\n  - uri: ep\n")
     contract = tmp_path / "c.yaml"
-    contract.write_text(SAMPLE_CONTRACT.read_text().replace("    topic: /joint_states", "    topic: joint_states"))
-    code, err = _run(_convert(manifest, contract, tmp_path / "out"), capsys)
+    contract.write_text(
+        SAMPLE_CONTRACT.read_text().replace("    topic: /joint_states", "    topic: joint_states")
+    )
+    code, err = _run(_convert(manifest, contract, tmp_path / "out"), capfd)
     assert code == 2
     assert f"{contract}:7 (observations[0].topic): topic 'joint_states' must be an absolute" in err
     assert "absolute ROS topic" in err
     assert not (tmp_path / "out").exists()
 
 
-def test_existing_output_is_not_touched(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+def test_existing_output_is_not_touched(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=0.3))
     manifest = tmp_path / "m.yaml"
     manifest.write_text("bags:\n  - uri: ep\n")
     out = tmp_path / "out"
     out.mkdir()
     (out / "keep.txt").write_text("mine")
-    code, err = _run(_convert(manifest, SAMPLE_CONTRACT, out), capsys)
+    code, err = _run(_convert(manifest, SAMPLE_CONTRACT, out), capfd)
     assert code == 2
     assert "already exists; nothing was written" in err
     assert (out / "keep.txt").read_text() == "mine"
@@ -61,14 +65,25 @@ def test_existing_output_is_not_touched(tmp_path: Path, capsys: pytest.CaptureFi
 
 @pytest.mark.slow
 def test_bag_without_a_contract_topic_fails_the_run_and_names_it(
-    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+    tmp_path: Path,
 ) -> None:
     write_episode_bag(tmp_path / "good", "mcap", EpisodeSpec(duration_s=0.5))
-    write_episode_bag(tmp_path / "no_wrist.bag", "ros1", EpisodeSpec(duration_s=0.5, cameras=(CameraSpec("front", "raw"),)))
+    write_episode_bag(
+        tmp_path / "no_wrist.bag", "ros1", EpisodeSpec(duration_s=0.5, cameras=(CameraSpec("front", "raw"),))
+    )
     manifest = tmp_path / "m.yaml"
     manifest.write_text("bags:\n  - uri: good\n  - uri: no_wrist.bag\n")
     out = tmp_path / "out"
-    code, err = _run(_convert(manifest, SAMPLE_CONTRACT, out) + ["--runner", "thread"], capsys)
+    # A fresh process, as a user runs it (Prefect binds its console handler once per process).
+    proc = subprocess.run(
+        [sys.executable, "-m", "flows.cli", *_convert(manifest, SAMPLE_CONTRACT, out), "--runner", "thread"],
+        capture_output=True,
+        text=True,
+        check=False,
+        cwd=REPO,
+    )
+    code, err = proc.returncode, proc.stderr
+    assert "Traceback" not in err
     assert code == 2
     assert "1 of 2 bag(s) failed; nothing was written" in err
     assert "bags[1]" in err

@@ -27,7 +27,9 @@ NS = 1_000_000_000
 def converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     root = tmp_path_factory.mktemp("e2e")
     bags = root / "bags"
-    assert main(["synth", "--out", str(bags), "--episodes", str(EPISODES), "--duration", str(DURATION_S)]) == 0
+    assert (
+        main(["synth", "--out", str(bags), "--episodes", str(EPISODES), "--duration", str(DURATION_S)]) == 0
+    )
     out = root / "dataset"
     code = main(
         [
@@ -46,14 +48,18 @@ def converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
 def _truth(index: int) -> GroundTruth:
     # The same specs `bagport synth` wrote (see write_sample_fleet).
     return GroundTruth(
-        EpisodeSpec(duration_s=DURATION_S, start_ns=1_700_000_000_000_000_000 + index * 3_600 * NS, seed=index)
+        EpisodeSpec(
+            duration_s=DURATION_S, start_ns=1_700_000_000_000_000_000 + index * 3_600 * NS, seed=index
+        )
     )
 
 
-def test_validate_cli_passes_with_lerobot(converted: tuple[Path, Path], capsys: pytest.CaptureFixture[str]) -> None:
+def test_validate_cli_passes_with_lerobot(
+    converted: tuple[Path, Path], capfd: pytest.CaptureFixture[str]
+) -> None:
     _, out = converted
     assert main(["validate", str(out), "--repo-id", "test/sample"]) == 0
-    assert f"{EPISODES} episode(s)" in capsys.readouterr().out
+    assert f"{EPISODES} episode(s)" in capfd.readouterr().out
 
 
 def test_lerobot_loads_every_frame_with_true_values_and_colours(converted: tuple[Path, Path]) -> None:
@@ -80,11 +86,19 @@ def test_lerobot_loads_every_frame_with_true_values_and_colours(converted: tuple
             assert abs(float(item["timestamp"]) - k / FPS) < 1e-6
             # hold: the newest joint sample at or before the tick, selected by joint name
             held = joint_ns[np.searchsorted(joint_ns, tick, side="right") - 1]
-            np.testing.assert_allclose(item["observation.state"].numpy(), truth.joint_position(held), atol=1e-6)
+            np.testing.assert_allclose(
+                item["observation.state"].numpy(), truth.joint_position(held), atol=1e-6
+            )
             assert 0 <= tick - held < NS // truth.spec.joint_rate_hz + 1
             for name, stamps in cams.items():
-                rgb = (item[f"observation.images.{name}"].permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)
-                code_mismatches += decode_frame_index(rgb) != (np.searchsorted(stamps, tick, side="right") - 1) % 1024
+                rgb = (
+                    (item[f"observation.images.{name}"].permute(1, 2, 0).numpy() * 255)
+                    .round()
+                    .astype(np.uint8)
+                )
+                code_mismatches += (
+                    decode_frame_index(rgb) != (np.searchsorted(stamps, tick, side="right") - 1) % 1024
+                )
                 # red, green, blue bars in that order: a BGR/RGB swap would trade red and blue
                 np.testing.assert_allclose(bar_means(rgb), expected_bar_colours(), atol=20)
             checked += 1
@@ -104,7 +118,9 @@ def test_layout_stats_and_provenance(converted: tuple[Path, Path]) -> None:
     assert info["robot_type"] == "bagport_sample_arm"
     assert info["features"]["observation.state"]["names"] == [f"position.j{i}" for i in range(1, 7)]
     assert info["features"]["observation.images.front"]["info"]["video.codec"] == "av1"
-    assert sorted(p.name for p in (out / "videos/observation.images.front/chunk-000").iterdir()) == ["file-000.mp4"]
+    assert sorted(p.name for p in (out / "videos/observation.images.front/chunk-000").iterdir()) == [
+        "file-000.mp4"
+    ]
     stats = json.loads((out / "meta/stats.json").read_text())
     data = pq.read_table(out / "data/chunk-000/file-000.parquet")
     state = np.stack(data.column("observation.state").to_numpy(zero_copy_only=False)).astype(np.float64)

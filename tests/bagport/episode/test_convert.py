@@ -12,14 +12,23 @@ import pytest
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.errors import AlignmentError, ContractError, ManifestError
 from bagport.staging import read_summary
-from bagport.synth import CameraSpec, EpisodeSpec, bar_means, decode_frame_index, expected_bar_colours, write_episode_bag
+from bagport.synth import (
+    CameraSpec,
+    EpisodeSpec,
+    bar_means,
+    decode_frame_index,
+    expected_bar_colours,
+    write_episode_bag,
+)
 from bagport.video import iter_frames
 from tests.helpers import SAMPLE_CONTRACT
 
 FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 
 
-def _request(bag: Path, staging: Path, contract_text: str | None = None, task: str | None = None) -> EpisodeRequest:
+def _request(
+    bag: Path, staging: Path, contract_text: str | None = None, task: str | None = None
+) -> EpisodeRequest:
     text = contract_text if contract_text is not None else SAMPLE_CONTRACT.read_text()
     return EpisodeRequest(
         episode_id=episode_id_for(str(bag), text, FAST),
@@ -83,7 +92,9 @@ def test_episode_matches_ground_truth(tmp_path: Path, storage: str) -> None:
             np.testing.assert_allclose(bar_means(rgb), expected_bar_colours(), atol=20)
 
     stats = json.loads((Path(summary.dir_uri) / "stats.json").read_text())
-    np.testing.assert_allclose(stats["observation.state"]["mean"], state.astype(np.float64).mean(axis=0), rtol=1e-6)
+    np.testing.assert_allclose(
+        stats["observation.state"]["mean"], state.astype(np.float64).mean(axis=0), rtol=1e-6
+    )
     assert np.asarray(stats["observation.images.front"]["mean"]).shape == (3, 1, 1)
     assert summary.tasks == (spec.task,)
     assert summary.task_source == "topic"
@@ -93,7 +104,9 @@ def test_missing_topic_names_the_bag_and_lists_what_it_has(tmp_path: Path) -> No
     bag = tmp_path / "ep"
     write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5))
     text = SAMPLE_CONTRACT.read_text().replace("/wrist/image_raw/compressed", "/wrist/nope")
-    with pytest.raises(ContractError, match=r"topic /wrist/nope .* is not in bag .*; the bag has: .*/joint_states"):
+    with pytest.raises(
+        ContractError, match=r"topic /wrist/nope .* is not in bag .*; the bag has: .*/joint_states"
+    ):
         convert_episode(_request(bag, tmp_path / "staging", text))
     assert not (tmp_path / "staging").exists()
 
@@ -111,7 +124,9 @@ def test_no_task_anywhere_is_an_error_and_manifest_task_is_the_fallback(tmp_path
 
 def test_asof_gap_is_an_explicit_error(tmp_path: Path) -> None:
     bag = tmp_path / "ep"
-    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5, cameras=(CameraSpec("front", "raw", rate_hz=5.0),)))
+    write_episode_bag(
+        bag, "mcap", EpisodeSpec(duration_s=0.5, cameras=(CameraSpec("front", "raw", rate_hz=5.0),))
+    )
     text = """\
 robot_type: r
 fps: 30
@@ -123,5 +138,7 @@ observations:
 tasks:
   - {key: task, topic: /task_prompt}
 """
-    with pytest.raises(AlignmentError, match=r"frames have no 'observation.images.front' message .* raise align.tol_ms"):
+    with pytest.raises(
+        AlignmentError, match=r"frames have no 'observation.images.front' message .* raise align.tol_ms"
+    ):
         convert_episode(_request(bag, tmp_path / "staging", text))

@@ -118,8 +118,8 @@ def _parser() -> argparse.ArgumentParser:
     convert.add_argument("--overwrite", action="store_true", help="replace an existing dataset at --output")
     convert.add_argument("--keep-staging", action="store_true", help="keep staged episodes after success")
     convert.add_argument("--chunks-size", type=int, default=1000)
-    convert.add_argument("--data-files-size-in-mb", type=int, default=100)
-    convert.add_argument("--video-files-size-in-mb", type=int, default=200)
+    convert.add_argument("--data-files-size-in-mb", type=float, default=100)
+    convert.add_argument("--video-files-size-in-mb", type=float, default=200)
     convert.set_defaults(func=_cmd_convert)
 
     inspect = sub.add_parser("inspect", help="print what `ros2 bag info` prints, without ROS")

@@ -49,7 +49,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     for request, future in zip(plan.requests, futures, strict=True):
         state = future.state
         if state.is_completed():
-            staged.append(future.result())
+            staged.append(state.result())
             continue
         # A bad bag's task ends Failed with bagport's one-paragraph error as its message.
         failures.append(f"- bags[{request.manifest_entry}] {request.bag_uri}: {state.message or state.name}")
@@ -65,7 +65,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     reduced = reduce_task(plan, staged, return_state=True)
     if not reduced.is_completed():
         return Failed(message=reduced.message or "writing the dataset failed")
-    report: DatasetReport = reduced.result()
+    report: DatasetReport = reduced.result()  # type: ignore[assignment] # completed: a report
     return report
 
 
@@ -117,5 +117,5 @@ def run_convert(config: ConvertConfig) -> DatasetReport:
     if not state.is_completed():
         # bagport's own errors arrive as the state message; anything else is a bug worth its traceback
         raise ConversionError(state.message or f"the conversion flow ended {state.name}")
-    result: DatasetReport = state.result()
+    result: DatasetReport = state.result()  # type: ignore[assignment] # completed: a report
     return result

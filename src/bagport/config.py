@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PositiveInt
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
 
 __all__ = ["ConvertConfig"]
 
@@ -33,8 +33,8 @@ class ConvertConfig(BaseModel):
         default_factory=dict, description="Video encoder settings (see configs/codecs)."
     )
     chunks_size: PositiveInt = 1000
-    data_files_size_in_mb: PositiveInt = 100
-    video_files_size_in_mb: PositiveInt = 200
+    data_files_size_in_mb: PositiveFloat = 100
+    video_files_size_in_mb: PositiveFloat = 200
     overwrite: bool = False
     keep_staging: bool = False
 

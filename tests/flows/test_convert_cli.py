@@ -10,6 +10,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from bagport.columns import vector_column
 from bagport.dataset.validate import video_backend
 from bagport.synth import EpisodeSpec, GroundTruth, bar_means, decode_frame_index, expected_bar_colours
 from flows.cli import main
@@ -112,7 +113,7 @@ def test_lerobot_loads_every_frame_with_true_values_and_colours(converted: tuple
 
 
 def test_layout_stats_and_provenance(converted: tuple[Path, Path]) -> None:
-    bags, out = converted
+    _bags, out = converted
     info = json.loads((out / "meta/info.json").read_text())
     assert info["codebase_version"] == "v3.0"
     assert info["robot_type"] == "bagport_sample_arm"
@@ -123,7 +124,7 @@ def test_layout_stats_and_provenance(converted: tuple[Path, Path]) -> None:
     ]
     stats = json.loads((out / "meta/stats.json").read_text())
     data = pq.read_table(out / "data/chunk-000/file-000.parquet")
-    state = np.stack(data.column("observation.state").to_numpy(zero_copy_only=False)).astype(np.float64)
+    state = vector_column(data, "observation.state").astype(np.float64)
     np.testing.assert_allclose(stats["observation.state"]["mean"], state.mean(axis=0), rtol=1e-5)
     np.testing.assert_allclose(stats["observation.state"]["min"], state.min(axis=0), rtol=1e-6)
     assert stats["observation.state"]["count"] == [data.num_rows]

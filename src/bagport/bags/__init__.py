@@ -8,4 +8,13 @@ from bagport.bags.reader import BagReader, open_bag
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.text import format_bag_info
 
-__all__ = ["BagInfo", "BagMessage", "BagReader", "Storage", "TopicInfo", "detect_storage", "format_bag_info", "open_bag"]
+__all__ = [
+    "BagInfo",
+    "BagMessage",
+    "BagReader",
+    "Storage",
+    "TopicInfo",
+    "detect_storage",
+    "format_bag_info",
+    "open_bag",
+]

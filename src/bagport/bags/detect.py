@@ -23,7 +23,9 @@ def _file_storage(path: Path, uri: str) -> Storage:
     except OSError as err:
         raise BagReadError(f"cannot be read ({err})", uri=uri) from err
     if not head:
-        raise BagReadError("is an empty file, not a bag", uri=uri, fix="re-copy the bag; the file has no data.")
+        raise BagReadError(
+            "is an empty file, not a bag", uri=uri, fix="re-copy the bag; the file has no data."
+        )
     if head.startswith(ROS1_MAGIC):
         return Storage.ROS1
     if head.startswith(MCAP_MAGIC):
@@ -46,7 +48,9 @@ def _file_storage(path: Path, uri: str) -> Storage:
 def detect_storage(path: Path, uri: str) -> Storage:
     """Storage of a local bag: a rosbag2 folder (by metadata or files) or a single file (by magic)."""
     if not path.exists():
-        raise BagReadError("does not exist", uri=uri, fix="check the manifest uri (relative to the manifest file).")
+        raise BagReadError(
+            "does not exist", uri=uri, fix="check the manifest uri (relative to the manifest file)."
+        )
     if path.is_file():
         return _file_storage(path, uri)
     metadata = path / "metadata.yaml"
@@ -55,7 +59,9 @@ def detect_storage(path: Path, uri: str) -> Storage:
             info = yaml.safe_load(metadata.read_text()) or {}
             storage_id = str(info.get("rosbag2_bagfile_information", {}).get("storage_identifier", ""))
         except (yaml.YAMLError, OSError, AttributeError) as err:
-            raise BagReadError(f"metadata.yaml is unreadable ({err})", uri=uri, fix="re-index the bag.") from err
+            raise BagReadError(
+                f"metadata.yaml is unreadable ({err})", uri=uri, fix="re-index the bag."
+            ) from err
         if storage_id in (Storage.MCAP, Storage.SQLITE3):
             return Storage(storage_id)
     files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix in (".mcap", ".db3"))

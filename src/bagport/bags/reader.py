@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import shutil
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
@@ -20,7 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 from bagport.bags.detect import detect_storage
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.records import BagInfo, Storage, TopicInfo
-from bagport.errors import BagReadError, BagportError, TransientError
+from bagport.errors import BagportError, BagReadError, TransientError
 
 __all__ = ["BagReader", "open_bag"]
 
@@ -87,7 +88,9 @@ class RosbagsReader:
         except (OSError, ValueError, KeyError, IndexError) as err:
             self.close()
             raise BagReadError(
-                f"cannot be opened ({type(err).__name__}: {err})", uri=uri, fix="the bag is corrupt or truncated."
+                f"cannot be opened ({type(err).__name__}: {err})",
+                uri=uri,
+                fix="the bag is corrupt or truncated.",
             ) from err
         files = [p for p in (path.iterdir() if path.is_dir() else [path]) if p.is_file()]
         counts: dict[str, tuple[str, int]] = {}
@@ -128,21 +131,23 @@ class RosbagsReader:
         deserialize = self._reader.deserialize
         try:
             for conn, log_ns, raw in self._reader.messages(connections=conns):
-                yield BagMessage(conn.topic, conn.msgtype, int(log_ns), raw, deserialize, layouts[conn.msgtype])
+                yield BagMessage(
+                    conn.topic, conn.msgtype, int(log_ns), raw, deserialize, layouts[conn.msgtype]
+                )
         except _ROSBAGS_ERRORS as err:
             raise BagReadError(f"reading failed: {err}", uri=self._uri, fix=_fix_for(err)) from err
         except (OSError, ValueError, KeyError, IndexError, EOFError) as err:
             raise BagReadError(
-                f"reading failed ({type(err).__name__}: {err})", uri=self._uri, fix="the bag is corrupt or truncated."
+                f"reading failed ({type(err).__name__}: {err})",
+                uri=self._uri,
+                fix="the bag is corrupt or truncated.",
             ) from err
 
     def close(self) -> None:
         reader = getattr(self, "_reader", None)
         if reader is not None and getattr(reader, "isopen", True):
-            try:
+            with contextlib.suppress(Exception):
                 reader.close()
-            except Exception:  # noqa: BLE001 - closing a half-open reader must not hide the real error
-                pass
         shutil.rmtree(self._scratch, ignore_errors=True)
         if self._cleanup is not None:
             shutil.rmtree(self._cleanup, ignore_errors=True)
@@ -192,7 +197,9 @@ def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | N
         raise BagReadError("does not exist", uri=uri, fix="check the manifest uri.") from err
     except PermissionError as err:
         shutil.rmtree(scratch, ignore_errors=True)
-        raise BagReadError(f"access denied ({err})", uri=uri, fix="check the credentials for this store.") from err
+        raise BagReadError(
+            f"access denied ({err})", uri=uri, fix="check the credentials for this store."
+        ) from err
     except (ConnectionError, TimeoutError, OSError) as err:
         shutil.rmtree(scratch, ignore_errors=True)
         raise TransientError(f"{uri}: download failed ({type(err).__name__}: {err}); try again") from err

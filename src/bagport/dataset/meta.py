@@ -42,8 +42,8 @@ __all__ = ["DatasetLimits", "EpisodeStats", "build_info", "load_episode_stats", 
 @dataclass(frozen=True, slots=True)
 class DatasetLimits:
     chunks_size: int = 1000
-    data_files_size_in_mb: int = 100
-    video_files_size_in_mb: int = 200
+    data_files_size_in_mb: float = 100
+    video_files_size_in_mb: float = 200
 
 
 @dataclass(frozen=True, slots=True)

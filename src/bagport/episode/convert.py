@@ -11,14 +11,13 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
-import pyarrow as pa
-import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport import __version__
 from bagport.align import grid_ticks_ns, select_for_ticks
 from bagport.bags import open_bag
+from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.contract.model import StampSource
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
@@ -182,7 +181,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
             )
             for name in table.column_names:
-                stats[name] = stats_to_json(vector_stats(_column_matrix(table, name)))
+                stats[name] = stats_to_json(vector_stats(vector_column(table, name)))
             for key, acc in sinks.image_stats.items():
                 stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
             (workdir / STATS_FILE).write_text(json.dumps(stats))
@@ -212,14 +211,6 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         finally:
             shutil.rmtree(workdir, ignore_errors=True)
     return summary
-
-
-def _column_matrix(table: pa.Table, name: str) -> npt.NDArray[np.float64]:
-    """A fixed-size-list column as a (frames, dims) array."""
-    column = table.column(name)
-    width = int(column.type.list_size)
-    flat = pc.list_flatten(column).to_numpy()
-    return np.asarray(flat, dtype=np.float64).reshape(-1, width)
 
 
 def _staged_features(

@@ -27,7 +27,10 @@ def _bar_slices(height: int, width: int) -> list[tuple[slice, slice]]:
     third = width // 3
     top = height // 2
     inset_y, inset_x = max(1, top // 4), max(1, third // 4)
-    return [(slice(inset_y, top - inset_y), slice(i * third + inset_x, (i + 1) * third - inset_x)) for i in range(3)]
+    return [
+        (slice(inset_y, top - inset_y), slice(i * third + inset_x, (i + 1) * third - inset_x))
+        for i in range(3)
+    ]
 
 
 def _block_slices(height: int, width: int) -> list[tuple[slice, slice]]:
@@ -42,7 +45,9 @@ def _block_slices(height: int, width: int) -> list[tuple[slice, slice]]:
     return blocks
 
 
-def render_frame(height: int, width: int, index: int, rng: np.random.Generator | None = None, noise: float = 0.0) -> Rgb:
+def render_frame(
+    height: int, width: int, index: int, rng: np.random.Generator | None = None, noise: float = 0.0
+) -> Rgb:
     """RGB uint8 (height, width, 3) for frame ``index``."""
     frame = np.zeros((height, width, 3), dtype=np.uint8)
     third = width // 3

@@ -32,10 +32,14 @@ class GroundTruth:
         self._phase = rng.uniform(0, 2 * np.pi, n)
         self._offset = rng.uniform(-0.5, 0.5, n)
         self._joint_ns = _periodic_ns(spec.start_ns, spec.duration_s, spec.joint_rate_hz)
-        self._action_ns = _periodic_ns(spec.start_ns, spec.duration_s, spec.action_rate_hz, offset_ns=1_000_000)
+        self._action_ns = _periodic_ns(
+            spec.start_ns, spec.duration_s, spec.action_rate_hz, offset_ns=1_000_000
+        )
         self._camera_ns: dict[str, Int64] = {}
         for index, cam in enumerate(spec.cameras):
-            base = _periodic_ns(spec.start_ns, spec.duration_s, cam.rate_hz, offset_ns=3_000_000 * (index + 1))
+            base = _periodic_ns(
+                spec.start_ns, spec.duration_s, cam.rate_hz, offset_ns=3_000_000 * (index + 1)
+            )
             jitter = rng.integers(-cam.jitter_ns, cam.jitter_ns + 1, base.size) if cam.jitter_ns else 0
             self._camera_ns[cam.name] = base + jitter
 
@@ -45,11 +49,15 @@ class GroundTruth:
     def joint_position(self, t_ns: Int64 | int) -> Float:
         """True joint positions (rad) at absolute time ``t_ns``; shape (..., joints)."""
         t = self._t_s(t_ns)
-        return self._amp * np.sin(2 * np.pi * self._freq_hz * t + self._phase) + self._offset
+        position: Float = self._amp * np.sin(2 * np.pi * self._freq_hz * t + self._phase) + self._offset
+        return position
 
     def joint_velocity(self, t_ns: Int64 | int) -> Float:
         t = self._t_s(t_ns)
-        return self._amp * 2 * np.pi * self._freq_hz * np.cos(2 * np.pi * self._freq_hz * t + self._phase)
+        velocity: Float = (
+            self._amp * 2 * np.pi * self._freq_hz * np.cos(2 * np.pi * self._freq_hz * t + self._phase)
+        )
+        return velocity
 
     def joint_effort(self, t_ns: Int64 | int) -> Float:
         return 0.1 * self.joint_position(t_ns)

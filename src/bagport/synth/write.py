@@ -60,7 +60,7 @@ def _raw_bytes(rgb: npt.NDArray[np.uint8], encoding: str) -> tuple[npt.NDArray[n
         out = rgb[:, :, ::-1]
     elif encoding in ("rgba8", "bgra8"):
         colour = rgb if encoding == "rgba8" else rgb[:, :, ::-1]
-        out = np.concatenate([colour, np.full(rgb.shape[:2] + (1,), 255, np.uint8)], axis=2)
+        out = np.concatenate([colour, np.full((*rgb.shape[:2], 1), 255, np.uint8)], axis=2)
     elif encoding == "mono8":
         out = rgb.mean(axis=2, keepdims=True).astype(np.uint8)
     else:
@@ -74,7 +74,13 @@ def _camera_message(msgs: _Messages, cam: CameraSpec, k: int, stamp_ns: int, rng
     if cam.kind == "raw":
         data, step = _raw_bytes(rgb, cam.encoding)
         return msgs.image(
-            header=header, height=cam.height, width=cam.width, encoding=cam.encoding, is_bigendian=0, step=step, data=data
+            header=header,
+            height=cam.height,
+            width=cam.width,
+            encoding=cam.encoding,
+            is_bigendian=0,
+            step=step,
+            data=data,
         )
     if cam.kind == "jpeg":
         payload = simplejpeg.encode_jpeg(rgb, quality=90, colorspace="RGB")
@@ -88,7 +94,11 @@ def _camera_message(msgs: _Messages, cam: CameraSpec, k: int, stamp_ns: int, rng
 
 def _joint_message(msgs: _Messages, truth: GroundTruth, k: int, stamp_ns: int) -> Any:
     names = list(truth.spec.joint_names)
-    pos, vel, eff = truth.joint_position(stamp_ns), truth.joint_velocity(stamp_ns), truth.joint_effort(stamp_ns)
+    pos, vel, eff = (
+        truth.joint_position(stamp_ns),
+        truth.joint_velocity(stamp_ns),
+        truth.joint_effort(stamp_ns),
+    )
     if k % 2:  # the order of names differs between messages: consumers must select by name
         names, pos, vel, eff = names[::-1], pos[::-1], vel[::-1], eff[::-1]
     return msgs.joint_state(
@@ -145,7 +155,10 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
         writer = Ros2Writer(path, version=9, storage_plugin=plugin)
     writer.open()
     try:
-        conns = {topic: writer.add_connection(topic, msgtype, typestore=msgs.store) for topic, msgtype in types.items()}
+        conns = {
+            topic: writer.add_connection(topic, msgtype, typestore=msgs.store)
+            for topic, msgtype in types.items()
+        }
         if storage != "ros1" and spec.task is not None:
             writer.set_custom_data(OPERATOR_PROMPT_KEY, spec.task)
         for log_ns, topic, k, stamp in _events(truth):
@@ -154,7 +167,7 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
             elif topic == spec.ACTION_TOPIC:
                 msg = _action_message(msgs, truth, k, stamp)
             elif topic == spec.TASK_TOPIC:
-                msg = msgs.string(data=spec.task)
+                msg = msgs.string(data=spec.task or "")
             else:
                 msg = _camera_message(msgs, cameras[topic], k, stamp, rng)
             writer.write(conns[topic], log_ns, msgs.serialize(msg, types[topic]))

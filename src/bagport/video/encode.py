@@ -33,7 +33,9 @@ class ClipInfo:
 class StreamingEncoder:
     """One clip; memory does not grow with the number of frames."""
 
-    def __init__(self, path: str | Path, *, fps: int, width: int, height: int, settings: EncoderSettings) -> None:
+    def __init__(
+        self, path: str | Path, *, fps: int, width: int, height: int, settings: EncoderSettings
+    ) -> None:
         if settings.pix_fmt.startswith("yuv420") and (width % 2 or height % 2):
             raise VideoError(
                 f"{path}: {width}x{height} frames cannot be encoded as {settings.pix_fmt} (needs even width and "
@@ -45,7 +47,9 @@ class StreamingEncoder:
         self._settings = settings
         try:
             self._container: Any = av.open(str(self._path), mode="w")
-            stream = self._container.add_stream(settings.codec, rate=fps, options=settings.codec_options())
+            stream: Any = self._container.add_stream(
+                settings.codec, rate=fps, options=settings.codec_options()
+            )
         except (av.error.FFmpegError, ValueError) as err:
             raise VideoError(
                 f"{path}: cannot start encoder {settings.codec!r} ({err}). Fix: pick a codec this PyAV build has "
@@ -79,10 +83,15 @@ class StreamingEncoder:
         if self._closed is not None:
             return self._closed
         try:
-            for packet in self._stream.encode(None):
-                self._container.mux(packet)
+            if self._frames:
+                for packet in self._stream.encode(None):
+                    self._container.mux(packet)
         finally:
             self._container.close()
+        if not self._frames:
+            self._path.unlink(missing_ok=True)
+            self._closed = ClipInfo(str(self._path), 0, self._fps, self._shape[1], self._shape[0], "", "", 0)
+            return self._closed
         self._closed = ClipInfo(
             path=str(self._path),
             frames=self._frames,
@@ -106,5 +115,8 @@ class StreamingEncoder:
 
 def _stream_codec_name(path: Path) -> str:
     """The stream's codec as decoders name it (``av1``, ``h264``), as LeRobot records it."""
-    with av.open(str(path)) as container:
+    container: Any = av.open(str(path))
+    try:
         return str(container.streams.video[0].codec.canonical_name)
+    finally:
+        container.close()

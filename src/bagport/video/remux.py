@@ -38,7 +38,13 @@ class VideoStreamInfo:
 
 def _signature(stream: Any) -> tuple[str, int, int, str, Fraction]:
     ctx = stream.codec_context
-    return (str(stream.codec.canonical_name), int(ctx.width), int(ctx.height), str(ctx.pix_fmt), Fraction(stream.time_base))
+    return (
+        str(stream.codec.canonical_name),
+        int(ctx.width),
+        int(ctx.height),
+        str(ctx.pix_fmt),
+        Fraction(stream.time_base),
+    )
 
 
 def concat_clips(clips: Sequence[str | Path], out_path: str | Path, *, fps: int) -> list[ClipPlacement]:
@@ -65,7 +71,9 @@ def concat_clips(clips: Sequence[str | Path], out_path: str | Path, *, fps: int)
                     reference = signature
                     per_frame = 1 / (Fraction(fps) * signature[4])
                     if per_frame.denominator != 1:
-                        raise VideoError(f"{clip}: time base {signature[4]} cannot represent 1/{fps} s exactly")
+                        raise VideoError(
+                            f"{clip}: time base {signature[4]} cannot represent 1/{fps} s exactly"
+                        )
                     ticks_per_frame = int(per_frame)
                     out_stream = out.add_stream_from_template(template=stream, opaque=True)
                     out_stream.time_base = stream.time_base
@@ -88,9 +96,7 @@ def concat_clips(clips: Sequence[str | Path], out_path: str | Path, *, fps: int)
                     packet.stream = out_stream
                     out.mux(packet)
                     count += 1
-            placements.append(
-                ClipPlacement(frames_before / fps, (frames_before + count) / fps, count)
-            )
+            placements.append(ClipPlacement(frames_before / fps, (frames_before + count) / fps, count))
             frames_before += count
     finally:
         out.close()
@@ -100,29 +106,37 @@ def concat_clips(clips: Sequence[str | Path], out_path: str | Path, *, fps: int)
 def probe_video(path: str | Path) -> VideoStreamInfo:
     """Header facts plus the exact frame count (packets, no decoding)."""
     try:
-        with av.open(str(path)) as container:
-            stream = container.streams.video[0]
-            frames = sum(1 for packet in container.demux(stream) if packet.dts is not None)
-            ctx = stream.codec_context
-            rate = stream.average_rate or stream.guessed_rate
-            duration = float(stream.duration * stream.time_base) if stream.duration else 0.0
-            return VideoStreamInfo(
-                codec=str(stream.codec.canonical_name),
-                pix_fmt=str(ctx.pix_fmt),
-                width=int(ctx.width),
-                height=int(ctx.height),
-                fps=float(rate) if rate else 0.0,
-                frames=frames,
-                duration_s=duration,
-                has_audio=bool(container.streams.audio),
-            )
+        container: Any = av.open(str(path))
+    except av.error.FFmpegError as err:
+        raise VideoError(f"{path}: not a readable video ({err})") from err
+    try:
+        stream = container.streams.video[0]
+        frames = sum(1 for packet in container.demux(stream) if packet.dts is not None)
+        ctx = stream.codec_context
+        rate = stream.average_rate or stream.guessed_rate
+        duration = float(stream.duration * stream.time_base) if stream.duration else 0.0
+        return VideoStreamInfo(
+            codec=str(stream.codec.canonical_name),
+            pix_fmt=str(ctx.pix_fmt),
+            width=int(ctx.width),
+            height=int(ctx.height),
+            fps=float(rate) if rate else 0.0,
+            frames=frames,
+            duration_s=duration,
+            has_audio=bool(container.streams.audio),
+        )
     except (av.error.FFmpegError, IndexError) as err:
         raise VideoError(f"{path}: not a readable video ({err})") from err
+    finally:
+        container.close()
 
 
 def iter_frames(path: str | Path) -> Iterator[tuple[float, npt.NDArray[np.uint8]]]:
     """Decode every frame: (pts in seconds, RGB HxWx3 uint8)."""
-    with av.open(str(path)) as container:
+    container: Any = av.open(str(path))
+    try:
         stream = container.streams.video[0]
         for frame in container.decode(stream):
             yield float(frame.pts * stream.time_base), frame.to_ndarray(format="rgb24")
+    finally:
+        container.close()

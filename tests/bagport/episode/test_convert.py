@@ -9,6 +9,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from bagport.columns import vector_column
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.errors import AlignmentError, ContractError, ManifestError
 from bagport.staging import read_summary
@@ -65,11 +66,11 @@ def test_episode_matches_ground_truth(tmp_path: Path, storage: str) -> None:
     np.testing.assert_allclose(frames.column("timestamp").to_numpy(), np.arange(n) / 30, atol=1e-6)
 
     # State: each frame holds the latest joint message at or before its tick (header stamps), by joint name.
-    state = np.stack(frames.column("observation.state").to_numpy(zero_copy_only=False))
+    state = vector_column(frames, "observation.state")
     joint_stamps = truth.joint_stamps_ns()
     latest = joint_stamps[np.searchsorted(joint_stamps, ticks, side="right") - 1]
     np.testing.assert_allclose(state, truth.joint_position(latest), atol=1e-6)
-    action = np.stack(frames.column("action").to_numpy(zero_copy_only=False))
+    action = vector_column(frames, "action")
     action_stamps = truth.action_stamps_ns()
     latest_action = action_stamps[np.searchsorted(action_stamps, ticks, side="right") - 1]
     np.testing.assert_allclose(action, truth.action_position(latest_action), atol=1e-6)
@@ -115,7 +116,7 @@ def test_no_task_anywhere_is_an_error_and_manifest_task_is_the_fallback(tmp_path
     bag = tmp_path / "ep"
     write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5, task=None))
     text = SAMPLE_CONTRACT.read_text().split("tasks:")[0]
-    with pytest.raises(ManifestError, match="has no task prompt.*add 'task: ...'"):
+    with pytest.raises(ManifestError, match=r"has no task prompt.*add 'task: \.\.\.'"):
         convert_episode(_request(bag, tmp_path / "staging", text))
     summary = convert_episode(_request(bag, tmp_path / "staging", text, task="stack blocks"))
     assert summary.tasks == ("stack blocks",)

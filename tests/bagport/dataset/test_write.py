@@ -1,0 +1,124 @@
+"""The reduce step: sharded files and chunks LeRobot loads, atomic publish, invariant checks."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from bagport.dataset import DatasetLimits, write_dataset
+from bagport.dataset.invariants import check_invariants
+from bagport.dataset.validate import validate_dataset
+from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.errors import DatasetWriteError, ValidationError
+from bagport.staging import EpisodeSummary
+from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from tests.helpers import SAMPLE_CONTRACT
+
+FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+
+
+@pytest.fixture(scope="module")
+def staged(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeSummary]:
+    root = tmp_path_factory.mktemp("staged")
+    text = SAMPLE_CONTRACT.read_text()
+    summaries = []
+    for i in range(5):
+        bag = root / f"ep{i}"
+        write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.4 + 0.1 * i, seed=i, task=f"task {i % 2}"))
+        request = EpisodeRequest(
+            episode_id=episode_id_for(str(bag), text, FAST),
+            bag_uri=str(bag),
+            manifest_entry=i,
+            staging_uri=str(root / "staging"),
+            contract_text=text,
+            contract_name="sample_robot.yaml",
+            encoder=FAST,
+        )
+        summaries.append(convert_episode(request))
+    return summaries
+
+
+@pytest.mark.slow
+def test_small_size_limits_span_several_files_and_chunks(
+    tmp_path: Path, staged: list[EpisodeSummary]
+) -> None:
+    out = tmp_path / "ds"
+    limits = DatasetLimits(chunks_size=2, data_files_size_in_mb=0.001, video_files_size_in_mb=0.001)
+    report = write_dataset(staged, str(out), robot_type="r", limits=limits)
+    assert report.episodes == 5
+    assert sorted(p.parent.name + "/" + p.name for p in (out / "data").rglob("*.parquet")) == [
+        "chunk-000/file-000.parquet",
+        "chunk-000/file-001.parquet",
+        "chunk-001/file-000.parquet",
+        "chunk-001/file-001.parquet",
+        "chunk-002/file-000.parquet",
+    ]
+    assert len(list((out / "videos/observation.images.front").rglob("*.mp4"))) == 5
+    result = validate_dataset(out, repo_id="test/sharded")
+    assert result.frames_decoded == report.frames == sum(s.frames for s in staged)
+
+
+def test_overwrite_is_atomic_and_failures_leave_the_old_dataset(
+    tmp_path: Path, staged: list[EpisodeSummary]
+) -> None:
+    out = tmp_path / "ds"
+    write_dataset(staged[:2], str(out), robot_type="r")
+    first = json.loads((out / "meta/info.json").read_text())
+    with pytest.raises(DatasetWriteError, match="already exists; nothing was written"):
+        write_dataset(staged, str(out), robot_type="r")
+    broken = [*staged[:2], EpisodeSummary.from_dict({**staged[2].to_dict(), "fps": 15})]
+    with pytest.raises(DatasetWriteError, match="was converted at 15 fps"):
+        write_dataset(broken, str(out), robot_type="r", overwrite=True)
+    assert json.loads((out / "meta/info.json").read_text()) == first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]  # no temporary folders left behind
+    write_dataset(staged, str(out), robot_type="r", overwrite=True)
+    assert json.loads((out / "meta/info.json").read_text())["total_episodes"] == 5
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+
+
+def test_inconsistent_features_are_refused(tmp_path: Path, staged: list[EpisodeSummary]) -> None:
+    other = tmp_path / "other"
+    write_episode_bag(
+        other,
+        "mcap",
+        EpisodeSpec(
+            duration_s=0.4,
+            cameras=(CameraSpec("front", "raw", height=48, width=64), CameraSpec("wrist", "jpeg")),
+        ),
+    )
+    text = SAMPLE_CONTRACT.read_text()
+    odd = convert_episode(
+        EpisodeRequest(
+            episode_id_for(str(other), text, FAST), str(other), 9, str(tmp_path / "st"), text, "c", FAST
+        )
+    )
+    with pytest.raises(
+        DatasetWriteError,
+        match=r"video 'observation.images.front' was encoded differently|feature 'observation.images.front' differs",
+    ):
+        write_dataset([staged[0], odd], str(tmp_path / "ds"), robot_type="r")
+    assert not (tmp_path / "ds").exists()
+
+
+def test_invariant_checks_catch_broken_datasets(tmp_path: Path, staged: list[EpisodeSummary]) -> None:
+    out = tmp_path / "ds"
+    write_dataset(staged[:2], str(out), robot_type="r")
+    check_invariants(out)
+    info_path = out / "meta/info.json"
+    info = json.loads(info_path.read_text())
+    info["total_frames"] += 1
+    info_path.write_text(json.dumps(info))
+    with pytest.raises(ValidationError, match=r"episodes cover \d+ frames, info.total_frames=\d+"):
+        check_invariants(out)
+    info["total_frames"] -= 1
+    info["features"]["observation.state"]["names"][0] = "a/b"
+    info_path.write_text(json.dumps(info))
+    with pytest.raises(ValidationError, match="names must not contain '/'"):
+        check_invariants(out)
+    info["features"]["observation.state"]["names"][0] = "position.j1"
+    info_path.write_text(json.dumps(info))
+    (out / "videos/observation.images.wrist/chunk-000/file-000.mp4").unlink()
+    with pytest.raises(ValidationError, match=r"file-000\.mp4: missing"):
+        check_invariants(out)

@@ -1,0 +1,96 @@
+"""Streaming encode and remux: colours survive, pts are frame indices, offsets stay exact."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import numpy.typing as npt
+import pytest
+
+from bagport.errors import VideoError
+from bagport.video import EncoderSettings, StreamingEncoder, concat_clips, iter_frames, probe_video
+
+FAST = EncoderSettings.from_dict({"codec": "libx264", "crf": 10, "preset": "ultrafast", "g": 2})
+
+
+def _frame(k: int, h: int = 32, w: int = 48) -> npt.NDArray[np.uint8]:
+    img = np.zeros((h, w, 3), np.uint8)
+    img[:, : w // 3] = (255, 0, 0)
+    img[:, w // 3 : 2 * w // 3] = (0, 255, 0)
+    img[:, 2 * w // 3 :] = (0, 0, 255)
+    img[: h // 4] = (k * 37) % 256
+    return img
+
+
+def _clip(path: Path, frames: int, settings: EncoderSettings = FAST, start: int = 0) -> Path:
+    with StreamingEncoder(path, fps=30, width=48, height=32, settings=settings) as enc:
+        for k in range(frames):
+            enc.write(_frame(start + k))
+    return path
+
+
+@pytest.mark.parametrize("settings", [EncoderSettings(), FAST], ids=["lerobot-default-av1", "x264"])
+def test_colours_and_pts_round_trip(tmp_path: Path, settings: EncoderSettings) -> None:
+    with StreamingEncoder(tmp_path / "c.mp4", fps=30, width=48, height=32, settings=settings) as enc:
+        for k in range(10):
+            enc.write(_frame(k))
+    info = enc.close()
+    assert info.frames == 10
+    assert info.codec == ("av1" if settings.codec == "libsvtav1" else "h264")
+    decoded = list(iter_frames(tmp_path / "c.mp4"))
+    assert [round(pts * 30, 6) for pts, _ in decoded] == list(range(10))
+    for _, rgb in decoded:
+        centres = rgb[20, [8, 24, 40]].astype(int)
+        assert np.abs(centres - np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]])).max() < 12
+
+
+def test_300_clips_keep_exact_offsets_for_lerobot(tmp_path: Path) -> None:
+    from lerobot.datasets.video_utils import decode_video_frames  # noqa: PLC0415
+
+    first = _clip(tmp_path / "a.mp4", 2)
+    second = _clip(tmp_path / "b.mp4", 3)
+    clips = [first if i % 2 == 0 else second for i in range(300)]
+    placements = concat_clips(clips, tmp_path / "all.mp4", fps=30)
+    frames_before = 0
+    for placement in placements:
+        assert placement.from_timestamp_s == frames_before / 30
+        frames_before += placement.frames
+    assert frames_before == 750
+    pts = [p for p, _ in iter_frames(tmp_path / "all.mp4")]
+    np.testing.assert_allclose(pts, np.arange(750) / 30, atol=1e-9)
+    assert probe_video(tmp_path / "all.mp4").frames == 750
+    for placement in (placements[0], placements[150], placements[-1]):
+        stamps = [placement.from_timestamp_s, placement.to_timestamp_s - 1 / 30]
+        frames = decode_video_frames(tmp_path / "all.mp4", stamps, tolerance_s=1e-4, backend="pyav")
+        assert tuple(frames.shape) == (2, 3, 32, 48)
+
+
+def test_mismatched_clips_are_refused(tmp_path: Path) -> None:
+    a = _clip(tmp_path / "a.mp4", 2)
+    b = _clip(tmp_path / "b.mp4", 2, EncoderSettings())
+    with pytest.raises(VideoError, match=r"b\.mp4: codec/size/pix_fmt.*differ"):
+        concat_clips([a, b], tmp_path / "all.mp4", fps=30)
+
+
+def test_bad_frames_and_settings_say_how_to_fix(tmp_path: Path) -> None:
+    enc = StreamingEncoder(tmp_path / "c.mp4", fps=30, width=48, height=32, settings=FAST)
+    with pytest.raises(
+        VideoError, match=r"frame 0 is uint8\[10, 10, 3\], the clip is uint8\[32, 48, 3\].*resize"
+    ):
+        enc.write(np.zeros((10, 10, 3), np.uint8))
+    assert enc.close().frames == 0
+    with pytest.raises(VideoError, match="needs even width and height"):
+        StreamingEncoder(tmp_path / "odd.mp4", fps=30, width=47, height=32, settings=FAST)
+    with pytest.raises(VideoError, match=r"unknown encoder setting\(s\) \['crff'\]"):
+        EncoderSettings.from_dict({"crff": 3})
+    with pytest.raises(VideoError, match="cannot start encoder 'nope'"):
+        StreamingEncoder(
+            tmp_path / "x.mp4", fps=30, width=48, height=32, settings=EncoderSettings(codec="nope")
+        )
+
+
+def test_lerobot_default_options() -> None:
+    assert EncoderSettings().codec_options() == {"g": "2", "crf": "30", "preset": "12"}
+    assert EncoderSettings(threads=2).codec_options()["svtav1-params"] == "lp=2"
+    assert EncoderSettings().to_info()["video.crf"] == 30

@@ -25,7 +25,8 @@ class TopicTimeline:
     topic: str
     log_ns: Int64Array
     header_ns: Int64Array | None
-    """``None`` when the message type has no header or any header stamp is zero."""
+    """``None`` when the type has no header, any stamp is zero, or the stamps never advance
+    (publishers that stamp every message with one constant time)."""
 
     @property
     def count(self) -> int:
@@ -68,6 +69,8 @@ def scan_timeline(reader: BagReader, topics: Iterable[str], task_topics: Iterabl
     for topic in feature_topics:
         stamps = header[topic]
         usable = bool(stamps) and all(s is not None and s > 0 for s in stamps)
+        if usable and len(stamps) > 1 and len(set(stamps)) == 1:
+            usable = False
         result[topic] = TopicTimeline(
             topic=topic,
             log_ns=np.asarray(log[topic], dtype=np.int64),

@@ -18,6 +18,7 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
+from bagport.errors import BagportError
 from bagport.synth.pixels import render_frame
 from bagport.synth.spec import CameraSpec, EpisodeSpec
 from bagport.synth.truth import GroundTruth
@@ -197,7 +198,9 @@ def write_sample_fleet(
         name = f"episode_{index:03d}" + (".bag" if storage == "ros1" else "")
         path = out_dir / name
         if path.exists():
-            raise FileExistsError(f"{path} exists; choose an empty --out folder")
+            raise BagportError(
+                f"{path} already exists; nothing was written. Fix: choose an empty --out folder."
+            )
         spec = EpisodeSpec(
             duration_s=duration_s,
             start_ns=1_700_000_000_000_000_000 + index * 3_600 * NS,

@@ -11,7 +11,7 @@ import pytest
 
 from bagport.columns import vector_column
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
-from bagport.errors import AlignmentError, ContractError, ManifestError
+from bagport.errors import AlignmentError, ContractError, DecodeError, ManifestError
 from bagport.staging import read_summary
 from bagport.synth import (
     CameraSpec,
@@ -22,7 +22,7 @@ from bagport.synth import (
     write_episode_bag,
 )
 from bagport.video import iter_frames
-from tests.helpers import SAMPLE_CONTRACT
+from tests.helpers import SAMPLE_CONTRACT, realbag
 
 FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 
@@ -141,5 +141,34 @@ tasks:
 """
     with pytest.raises(
         AlignmentError, match=r"frames have no 'observation.images.front' message .* raise align.tol_ms"
+    ):
+        convert_episode(_request(bag, tmp_path / "staging", text))
+
+
+def test_a_type_bagport_cannot_decode_says_how_to_map_it(tmp_path: Path) -> None:
+    bag = realbag("rerun_humble_sensors/rosbag2_2025_09_10-13_03_56_0.mcap")
+    text = """\
+robot_type: r
+fps: 10
+observations:
+  - {key: observation.state, topic: /joint_state, type: sensor_msgs/msg/JointState}
+  - {key: observation.log, topic: /rosout, type: rcl_interfaces/msg/Log}
+"""
+    with pytest.raises(
+        DecodeError,
+        match=r"does not know which fields of rcl_interfaces/msg/Log .*topic=/rosout.*Fix: list the fields in selector\.names",
+    ):
+        convert_episode(_request(bag, tmp_path / "staging", text, task="t"))
+
+
+def test_type_mismatch_between_contract_and_bag(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.3))
+    text = SAMPLE_CONTRACT.read_text().replace(
+        "type: sensor_msgs/msg/Image", "type: sensor_msgs/msg/CompressedImage", 1
+    )
+    with pytest.raises(
+        ContractError,
+        match=r"/front/image_raw in bag .* has type sensor_msgs/msg/Image, the contract says sensor_msgs/msg/CompressedImage",
     ):
         convert_episode(_request(bag, tmp_path / "staging", text))

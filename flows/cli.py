@@ -58,6 +58,7 @@ def _cmd_convert(args: argparse.Namespace) -> int:
         staging=args.staging,
         workers=args.workers,
         runner=args.runner,
+        dask_address=args.dask_address,
         encoder=_load_encoder(args.codec),
         overwrite=args.overwrite,
         keep_staging=args.keep_staging,
@@ -113,7 +114,15 @@ def _parser() -> argparse.ArgumentParser:
     convert.add_argument("--repo-id", default=None, help="LeRobot repo id recorded for the dataset")
     convert.add_argument("--staging", default=None, help="staging store URI (default: <output>.staging)")
     convert.add_argument("--workers", type=int, default=None, help="parallel episodes (default: CPU count)")
-    convert.add_argument("--runner", choices=["process", "thread"], default="process")
+    convert.add_argument(
+        "--runner",
+        choices=["process", "thread", "dask"],
+        default="process",
+        help="process pool (default), threads, or Dask (a local cluster, or --dask-address)",
+    )
+    convert.add_argument(
+        "--dask-address", default=None, help="existing Dask scheduler, e.g. tcp://10.0.0.5:8786"
+    )
     convert.add_argument("--codec", default=None, help="encoder preset name in configs/codecs or a YAML file")
     convert.add_argument("--overwrite", action="store_true", help="replace an existing dataset at --output")
     convert.add_argument("--keep-staging", action="store_true", help="keep staged episodes after success")

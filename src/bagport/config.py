@@ -26,8 +26,12 @@ class ConvertConfig(BaseModel):
     workers: PositiveInt | None = Field(
         default=None, description="Parallel episode workers; default: CPU count."
     )
-    runner: Literal["process", "thread"] = Field(
+    runner: Literal["process", "thread", "dask"] = Field(
         default="process", description="Task runner for the fan-out."
+    )
+    dask_address: str | None = Field(
+        default=None,
+        description="Existing Dask scheduler (tcp://host:port); default: a local cluster of processes.",
     )
     encoder: dict[str, Any] = Field(
         default_factory=dict, description="Video encoder settings (see configs/codecs)."

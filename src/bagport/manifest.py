@@ -62,9 +62,13 @@ def _is_url(uri: str) -> bool:
 
 
 def _absolute(uri: str, base_dir: str) -> str:
+    """``uri`` relative to the manifest's folder (a local path or a URL such as ``s3://bucket/dir``)."""
     if _is_url(uri) or uri.startswith("/") or not base_dir:
         return uri
-    return posixpath.normpath(posixpath.join(base_dir, uri))
+    protocol, sep, path = base_dir.partition("://")
+    if not sep:
+        return posixpath.normpath(posixpath.join(base_dir, uri))
+    return f"{protocol}://{posixpath.normpath(posixpath.join(path, uri))}"
 
 
 def _expand(uri: str, entry: int, source: str, storage_options: dict[str, Any]) -> list[str]:

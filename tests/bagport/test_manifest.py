@@ -73,3 +73,12 @@ def test_duplicate_bag_is_an_error(tmp_path: Path) -> None:
 def test_missing_manifest_file() -> None:
     with pytest.raises(ManifestError, match="does not exist"):
         load_manifest("/no/such/manifest.yaml")
+
+
+def test_relative_uris_in_a_remote_manifest() -> None:
+    fs = fsspec.filesystem("memory")
+    fs.pipe("/fleet2/day/ep.mcap", b"x")
+    fs.pipe("/fleet2/manifest.yaml", b"bags:\n  - uri: day/ep.mcap\n")
+    assert [b.uri for b in load_manifest("memory://fleet2/manifest.yaml").bags] == [
+        "memory://fleet2/day/ep.mcap"
+    ]

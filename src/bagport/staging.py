@@ -71,6 +71,9 @@ class EpisodeSummary:
     metadata: dict[str, Any] = field(default_factory=dict)
     bagport_version: str = ""
     contract_sha256: str = ""
+    source_stamp: str = ""
+    """Names, sizes and modification times of the bag's files when it was converted."""
+    default_task: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

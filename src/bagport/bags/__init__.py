@@ -6,6 +6,7 @@ from bagport.bags.detect import detect_storage
 from bagport.bags.message import BagMessage
 from bagport.bags.reader import BagReader, open_bag
 from bagport.bags.records import BagInfo, Storage, TopicInfo
+from bagport.bags.stamp import source_stamp
 from bagport.bags.text import format_bag_info
 
 __all__ = [
@@ -17,4 +18,5 @@ __all__ = [
     "detect_storage",
     "format_bag_info",
     "open_bag",
+    "source_stamp",
 ]

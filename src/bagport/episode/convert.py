@@ -5,7 +5,7 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -16,7 +16,7 @@ from fsspec.core import url_to_fs
 
 from bagport import __version__
 from bagport.align import grid_ticks_ns, select_for_ticks
-from bagport.bags import open_bag
+from bagport.bags import open_bag, source_stamp
 from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.contract.model import StampSource
@@ -35,6 +35,7 @@ from bagport.staging import (
     EpisodeSummary,
     StagedFeature,
     episode_dir,
+    read_summary,
     staged_path,
     write_json,
 )
@@ -162,6 +163,10 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     """
     plan = parse_contract(request.contract_text, request.contract_name)
     settings = EncoderSettings.from_dict(request.encoder)
+    stamp = source_stamp(request.bag_uri)
+    reusable = _reusable(request, stamp)
+    if reusable is not None:
+        return reusable
     with open_bag(request.bag_uri) as reader:
         info = reader.info
         check_bag_fits(info, plan)
@@ -206,11 +211,34 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 metadata=dict(request.metadata),
                 bagport_version=__version__,
                 contract_sha256=request.contract_sha256,
+                source_stamp=stamp,
+                default_task=request.default_task,
             )
             _publish(workdir, target, summary)
         finally:
             shutil.rmtree(workdir, ignore_errors=True)
     return summary
+
+
+def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
+    """A completed staged episode of the same bag files, contract, encoder and task default.
+
+    Re-running a flow after a failure skips the episodes that already finished.
+    """
+    if not stamp:
+        return None
+    existing = read_summary(episode_dir(request.staging_uri, request.episode_id))
+    if existing is None:
+        return None
+    same = (
+        existing.source_stamp == stamp
+        and existing.bag_uri == request.bag_uri
+        and existing.contract_sha256 == request.contract_sha256
+        and existing.default_task == request.default_task
+    )
+    if not same:
+        return None
+    return replace(existing, manifest_entry=request.manifest_entry, metadata=dict(request.metadata))
 
 
 def _staged_features(

@@ -172,3 +172,20 @@ def test_type_mismatch_between_contract_and_bag(tmp_path: Path) -> None:
         match=r"/front/image_raw in bag .* has type sensor_msgs/msg/Image, the contract says sensor_msgs/msg/CompressedImage",
     ):
         convert_episode(_request(bag, tmp_path / "staging", text))
+
+
+def test_rerun_reuses_finished_episodes_until_the_bag_changes(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5))
+    first = convert_episode(_request(bag, tmp_path / "staging"))
+    marker = Path(first.dir_uri) / "episode.json"
+    written_ns = marker.stat().st_mtime_ns
+    again = convert_episode(_request(bag, tmp_path / "staging"))
+    assert again == first
+    assert marker.stat().st_mtime_ns == written_ns  # not converted again
+    (bag / "ep.mcap").unlink()
+    write_episode_bag(tmp_path / "other", "mcap", EpisodeSpec(duration_s=0.7, seed=9))
+    (tmp_path / "other" / "other.mcap").rename(bag / "ep.mcap")
+    changed = convert_episode(_request(bag, tmp_path / "staging"))
+    assert changed.frames != first.frames
+    assert changed.source_stamp != first.source_stamp

@@ -22,6 +22,7 @@ import yaml
 from fsspec.core import url_to_fs
 
 from bagport.errors import ManifestError
+from bagport.uris import is_local, protocol_of
 from bagport.yamlsource import load_yaml, primary_error
 
 __all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
@@ -76,8 +77,7 @@ def _expand(uri: str, entry: int, source: str, storage_options: dict[str, Any]) 
         fs, path = url_to_fs(uri, **storage_options)
     except (ImportError, ValueError) as err:
         raise ManifestError(f"uri {uri!r} cannot be opened: {err}", file=source, entry=entry) from err
-    protocol = fs.protocol[0] if isinstance(fs.protocol, tuple) else fs.protocol
-    prefix = "" if protocol in ("file", "local") else f"{protocol}://"
+    prefix = "" if is_local(fs) else f"{protocol_of(fs)}://"
     try:
         if _GLOB_CHARS & set(path):
             found = sorted(fs.glob(path))

@@ -22,6 +22,7 @@ from bagport.bags.detect import detect_storage
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.errors import BagportError, BagReadError, TransientError
+from bagport.uris import is_local
 
 __all__ = ["BagReader", "open_bag"]
 
@@ -168,18 +169,13 @@ def _fix_for(err: Exception) -> str:
     return "check that the file is a complete, uncorrupted bag."
 
 
-def _is_local(protocol: str | tuple[str, ...]) -> bool:
-    names = protocol if isinstance(protocol, tuple) else (protocol,)
-    return "file" in names or "local" in names
-
-
 def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | None]:
     """Local path of the bag; a remote bag is copied to a private temp folder first."""
     try:
         fs, path = url_to_fs(uri, **storage_options)
     except (ValueError, ImportError) as err:
         raise BagReadError(f"cannot be opened ({err})", uri=uri, fix="check the URI scheme.") from err
-    if _is_local(fs.protocol):
+    if is_local(fs):
         return Path(path), None
     scratch = Path(tempfile.mkdtemp(prefix="bagport-bag-"))
     local = scratch / path.rstrip("/").rsplit("/", 1)[-1]

@@ -11,6 +11,7 @@ from fsspec.core import url_to_fs
 
 from bagport.dataset.layout import VIDEO_PATH, next_chunk_file
 from bagport.staging import EpisodeSummary
+from bagport.uris import is_local
 from bagport.video import concat_clips
 
 __all__ = ["VideoPlacement", "write_video_files"]
@@ -29,7 +30,7 @@ class VideoPlacement:
 def _local_clip(uri: str, scratch: Path, name: str) -> tuple[Path, int]:
     fs, path = url_to_fs(uri)
     size = int(fs.size(path))
-    if "file" in (fs.protocol if isinstance(fs.protocol, tuple) else (fs.protocol,)):
+    if is_local(fs):
         return Path(path), size
     local = scratch / name
     fs.get_file(path, str(local))

@@ -21,6 +21,7 @@ from bagport.dataset.provenance import write_provenance
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
 from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
+from bagport.uris import is_local
 
 __all__ = ["DatasetReport", "write_dataset"]
 
@@ -144,7 +145,7 @@ def write_dataset(
     """
     limits = limits or DatasetLimits()
     fs, out_path = url_to_fs(output)
-    local = "file" in (fs.protocol if isinstance(fs.protocol, tuple) else (fs.protocol,))
+    local = is_local(fs)
     if fs.exists(out_path) and not overwrite:
         raise DatasetWriteError(
             f"{output} already exists; nothing was written. Fix: choose a new --output, or pass --overwrite "

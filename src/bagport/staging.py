@@ -74,6 +74,8 @@ class EpisodeSummary:
     source_stamp: str = ""
     """Names, sizes and modification times of the bag's files when it was converted."""
     default_task: str | None = None
+    alignment: list[dict[str, Any]] = field(default_factory=list)
+    """Per source: stamp, strategy, fill, alignment error (ms), held/interpolated/filled/dropped frames."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

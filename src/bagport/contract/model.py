@@ -87,9 +87,11 @@ class ImageOptions(_Strict):
 
 
 class AlignOptions(_Strict):
-    strategy: Literal["hold", "asof", "drop"] = "hold"
+    strategy: Literal["hold", "asof", "drop", "nearest", "interpolate"] = "hold"
     tol_ms: PositiveFloat | None = None
     stamp: StampSource | None = None
+    fill: Literal["fail", "hold", "zeros", "drop_frame"] = "fail"
+    """What a frame without a valid message gets; never silent (recorded in provenance)."""
 
 
 class ObservationEntry(_Strict):

@@ -42,6 +42,7 @@ class SourceSpec:
     tol_ms: float | None
     resize_hw: tuple[int, int] | None
     decoder: str | None
+    fill: str = "fail"
 
 
 @dataclass(frozen=True, slots=True)
@@ -99,7 +100,45 @@ def _source(
         tol_ms=align.tol_ms if align else None,
         resize_hw=(resize[0], resize[1]) if resize else None,
         decoder=entry.decoder,
+        fill=align.fill if align else "fail",
     )
+
+
+_SCALAR_TYPES = frozenset(f"std_msgs/msg/{name}" for name in ("Float32", "Float64", "Int32", "Int64", "Bool"))
+
+
+def _check_align(src: SourceSpec, section: str, source_name: str) -> None:
+    field = f"{section}[key={src.key}].align"
+    is_image = src.msgtype in IMAGE_TYPES
+    if src.strategy in ("asof", "nearest") and src.tol_ms is None:
+        raise ContractError(
+            f"align.strategy {src.strategy!r} on {src.topic} needs tol_ms",
+            file=source_name,
+            field=f"{field}.tol_ms",
+            fix="add e.g. 'tol_ms: 50', or use strategy 'hold'.",
+        )
+    if src.strategy == "interpolate" and is_image:
+        raise ContractError(
+            f"images cannot be interpolated ({src.key} on {src.topic})",
+            file=source_name,
+            field=f"{field}.strategy",
+            fix="use 'hold', 'asof' or 'nearest' for cameras.",
+        )
+    if src.fill == "zeros":
+        if is_image and src.resize_hw is None:
+            raise ContractError(
+                f"fill 'zeros' on camera {src.key} needs a known frame size",
+                file=source_name,
+                field=f"{field}.fill",
+                fix="set 'image: {resize: [h, w]}', or use fill 'hold' / 'drop_frame' / 'fail'.",
+            )
+        if not is_image and not src.names and src.msgtype not in _SCALAR_TYPES:
+            raise ContractError(
+                f"fill 'zeros' on {src.key} needs a known width",
+                file=source_name,
+                field=f"{field}.fill",
+                fix="list the dimensions in selector.names.",
+            )
 
 
 def compile_contract(contract: Contract, source_name: str = "contract") -> ContractPlan:
@@ -119,13 +158,7 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
     grouped: dict[str, list[tuple[SourceSpec, str | None]]] = {}
     for entry, section, stamp in entries:
         src = _source(entry, section, stamp)
-        if src.strategy in ("asof",) and src.tol_ms is None:
-            raise ContractError(
-                f"align.strategy 'asof' on {src.topic} needs tol_ms",
-                file=source_name,
-                field=f"{section}[key={src.key}].align.tol_ms",
-                fix="add e.g. 'tol_ms: 50', or use strategy 'hold'.",
-            )
+        _check_align(src, section, source_name)
         grouped.setdefault(src.key, []).append((src, entry.dtype))
 
     features = []

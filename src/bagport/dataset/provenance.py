@@ -64,6 +64,7 @@ def write_provenance(
             "last_tick_ns": s.last_tick_ns,
             "task_source": s.task_source,
             "stamp_sources": s.stamp_sources,
+            "alignment": s.alignment,
             "metadata": s.metadata,
         }
         for i, s in enumerate(summaries)

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from bagport.align import Selection
 from bagport.bags import BagMessage, BagReader
 from bagport.contract.plan import FeatureKind, FeatureSpec, SourceSpec
 from bagport.decode import VectorExtractor, decode_image, make_extractor, resize_rgb
@@ -34,16 +35,45 @@ class AlignedSource:
     kind: FeatureKind
     timeline: TopicTimeline
     stamp_used: str
-    selection: Int64Array
+    selection: Selection
+    filled: npt.NDArray[np.bool_]
+    """Ticks whose value comes from ``align.fill`` (held past a gap, or zeros)."""
     extractor: VectorExtractor | None = None
     cache: dict[int, Any] = field(default_factory=dict)
     last_use: dict[int, int] = field(default_factory=dict)
     needed: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
+    required: Int64Array = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def prepare(self) -> None:
         self.needed = np.zeros(self.timeline.count, dtype=np.bool_)
-        self.needed[self.selection] = True
-        self.last_use = {int(i): k for k, i in enumerate(self.selection)}
+        lo, hi = self.selection.lo, self.selection.hi
+        self.needed[lo[lo >= 0]] = True
+        self.required = lo.copy()
+        for k, index in enumerate(lo.tolist()):
+            if index >= 0:
+                self.last_use[index] = k
+        if hi is not None:
+            self.needed[hi[hi >= 0]] = True
+            self.required = np.maximum(lo, hi)
+            for k, index in enumerate(hi.tolist()):
+                if index >= 0:
+                    self.last_use[index] = max(k, self.last_use.get(index, k))
+
+    def value(self, k: int) -> Any:
+        lo = int(self.selection.lo[k])
+        if lo < 0:  # fill: zeros, checked against the contract beforehand
+            return self._zeros()
+        value = self.cache[lo]
+        if self.selection.hi is not None and self.selection.weight is not None:
+            weight = float(self.selection.weight[k])
+            if weight > 0:
+                value = (1.0 - weight) * value + weight * self.cache[int(self.selection.hi[k])]
+        return value
+
+    def _zeros(self) -> Any:
+        if self.kind is FeatureKind.VIDEO and self.src.resize_hw is not None:
+            return np.zeros((*self.src.resize_hw, 3), dtype=np.uint8)
+        return np.zeros(max(1, len(self.src.names)), dtype=np.float64)
 
 
 @dataclass(frozen=True, slots=True)
@@ -52,8 +82,7 @@ class Frame:
     tick_ns: int
     vectors: dict[str, npt.NDArray[np.float64]]
     images: dict[str, npt.NDArray[np.uint8]]
-    sources: Sequence[tuple[AlignedSource, int]]
-    """Each source with the index (in its topic's log order) of the message used."""
+    sources: Sequence[AlignedSource]
 
 
 def _decode(source: AlignedSource, message: BagMessage) -> Any:
@@ -85,6 +114,18 @@ def assemble_frames(
     total = int(ticks_ns.size)
     next_tick = 0
     by_key = {f.key: [s for s in sources if s.src.key == f.key] for f in features}
+
+    def ready(k: int) -> bool:
+        return all(arrived[s.src.topic] > s.required[k] for s in sources)
+
+    def emit_ready() -> None:
+        nonlocal next_tick
+        while next_tick < total and ready(next_tick):
+            on_frame(_frame(next_tick, int(ticks_ns[next_tick]), features, by_key, sources))
+            _release(sources, next_tick)
+            next_tick += 1
+
+    emit_ready()  # ticks made only of fills need no message
     for message in reader.messages(tuple(by_topic)):
         index = arrived[message.topic]
         arrived[message.topic] = index + 1
@@ -96,12 +137,8 @@ def assemble_frames(
                     source.cache[index] = _decode(source, message)
                 except DecodeError as err:
                     raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
-        if not wanted:
-            continue
-        while next_tick < total and all(arrived[s.src.topic] > s.selection[next_tick] for s in sources):
-            on_frame(_frame(next_tick, int(ticks_ns[next_tick]), features, by_key))
-            _release(sources, next_tick)
-            next_tick += 1
+        if wanted:
+            emit_ready()
         if next_tick == total:
             break
     if next_tick < total:
@@ -115,26 +152,28 @@ def assemble_frames(
 
 
 def _frame(
-    k: int, tick_ns: int, features: Sequence[FeatureSpec], by_key: dict[str, list[AlignedSource]]
+    k: int,
+    tick_ns: int,
+    features: Sequence[FeatureSpec],
+    by_key: dict[str, list[AlignedSource]],
+    sources: Sequence[AlignedSource],
 ) -> Frame:
     vectors: dict[str, npt.NDArray[np.float64]] = {}
     images: dict[str, npt.NDArray[np.uint8]] = {}
-    used: list[tuple[AlignedSource, int]] = []
     for feature in features:
-        parts = []
-        for source in by_key[feature.key]:
-            index = int(source.selection[k])
-            used.append((source, index))
-            parts.append(source.cache[index])
+        parts = [source.value(k) for source in by_key[feature.key]]
         if feature.kind is FeatureKind.VIDEO:
             images[feature.key] = parts[0]
         else:
             vectors[feature.key] = parts[0] if len(parts) == 1 else np.concatenate(parts)
-    return Frame(k, tick_ns, vectors, images, used)
+    return Frame(k, tick_ns, vectors, images, sources)
 
 
 def _release(sources: Sequence[AlignedSource], k: int) -> None:
     for source in sources:
-        index = int(source.selection[k])
-        if source.last_use.get(index) == k:
-            source.cache.pop(index, None)
+        for array in (source.selection.lo, source.selection.hi):
+            if array is None:
+                continue
+            index = int(array[k])
+            if index >= 0 and source.last_use.get(index) == k:
+                source.cache.pop(index, None)

@@ -9,24 +9,21 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-import numpy.typing as npt
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport import __version__
-from bagport.align import grid_ticks_ns, select_for_ticks
 from bagport.bags import open_bag, source_stamp
 from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
-from bagport.contract.model import StampSource
+from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
 from bagport.episode.checks import bag_fingerprint, check_bag_fits
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.sinks import FrameTableWriter, ProvenanceWriter
 from bagport.episode.tasks import resolve_tasks
-from bagport.episode.timeline import Timeline, scan_timeline
-from bagport.errors import AlignmentError, DecodeError
+from bagport.episode.timeline import scan_timeline
+from bagport.errors import DecodeError
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,
@@ -43,56 +40,6 @@ from bagport.stats import ImageStatsAccumulator, stats_to_json, vector_stats
 from bagport.video import EncoderSettings, StreamingEncoder
 
 __all__ = ["convert_episode"]
-
-
-def _align(
-    plan: ContractPlan, timeline: Timeline, uri: str
-) -> tuple[list[AlignedSource], npt.NDArray[np.int64]]:
-    chosen: list[tuple[Any, StampSource]] = []
-    for feature in plan.features:
-        for src in feature.sources:
-            topic = timeline.topics[src.topic]
-            stamp: StampSource = src.stamp or ("header" if topic.header_ns is not None else "receive")
-            if stamp == "header" and topic.header_ns is None:
-                raise AlignmentError(
-                    f"align.stamp is 'header' for {src.key!r} but {src.topic} has no header stamps "
-                    "(type without header, or stamps left at zero)",
-                    uri=uri,
-                    topic=src.topic,
-                    fix="set 'align: {stamp: receive}' for this entry.",
-                )
-            chosen.append(((feature, src, topic), stamp))
-    firsts = [(t.stamps(s).min(), t.topic) for (_, _, t), s in chosen]
-    lasts = [(t.stamps(s).max(), t.topic) for (_, _, t), s in chosen]
-    start_ns, start_topic = max(firsts)
-    end_ns, end_topic = min(lasts)
-    if end_ns < start_ns:
-        ranges = "; ".join(
-            f"{t.topic}: {int(t.stamps(s).min())}..{int(t.stamps(s).max())} ns" for (_, _, t), s in chosen
-        )
-        raise AlignmentError(
-            f"the streams never overlap in time ({start_topic} starts after {end_topic} ends): {ranges}",
-            uri=uri,
-            fix="check the topics and the stamp source (header vs receive) in the contract.",
-        )
-    ticks = grid_ticks_ns(int(start_ns), int(end_ns), plan.fps)
-    sources = []
-    for (feature, src, topic), stamp in chosen:
-        selection = select_for_ticks(
-            topic.stamps(stamp), ticks, strategy=src.strategy, fps=plan.fps, tol_ms=src.tol_ms
-        )
-        missing = np.flatnonzero(selection < 0)
-        if missing.size:
-            first = int(ticks[missing[0]])
-            raise AlignmentError(
-                f"{missing.size} of {ticks.size} frames have no {src.key!r} message under align.strategy "
-                f"{src.strategy!r} (first at t_ns={first}, {(first - ticks[0]) / 1e9:.3f} s into the episode)",
-                uri=uri,
-                topic=src.topic,
-                fix="raise align.tol_ms, or use 'strategy: hold'; bagport never fills missing values silently.",
-            )
-        sources.append(AlignedSource(src, feature.kind, topic, stamp, selection))
-    return sources, ticks
 
 
 @dataclass
@@ -134,18 +81,8 @@ class _EpisodeSinks:
                     t_ns=frame.tick_ns,
                     fix="select a fixed set of dimensions with selector.names.",
                 )
-        for source, index in frame.sources:
-            header = source.timeline.header_ns
-            self.provenance.add(
-                frame.index,
-                source.src.key,
-                source.src.topic,
-                frame.tick_ns,
-                int(source.timeline.log_ns[index]),
-                int(header[index]) if header is not None else None,
-                source.stamp_used,
-                index,
-            )
+        for source in frame.sources:
+            self.provenance.add_source(frame.index, frame.tick_ns, source)
         self.frames.add(frame.index, self.frame_tasks[frame.index], frame.vectors)
 
     def close(self) -> dict[str, Any]:
@@ -171,7 +108,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         info = reader.info
         check_bag_fits(info, plan)
         timeline = scan_timeline(reader, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics])
-        sources, ticks = _align(plan, timeline, request.bag_uri)
+        sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
         frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
         try:
@@ -213,6 +150,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 contract_sha256=request.contract_sha256,
                 source_stamp=stamp,
                 default_task=request.default_task,
+                alignment=alignment,
             )
             _publish(workdir, target, summary)
         finally:

@@ -7,12 +7,15 @@ grow with episode length.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
+
+if TYPE_CHECKING:
+    from bagport.episode.assemble import AlignedSource
 
 __all__ = ["FrameTableWriter", "ProvenanceWriter", "vector_type"]
 
@@ -83,6 +86,9 @@ PROVENANCE_SCHEMA = pa.schema(
         ("source_header_ns", pa.int64()),
         ("stamp_used", pa.dictionary(pa.int32(), pa.string())),
         ("message_index", pa.int64()),
+        ("message_index_next", pa.int64()),
+        ("weight", pa.float64()),
+        ("fill", pa.dictionary(pa.int32(), pa.string())),
     ]
 )
 
@@ -94,26 +100,25 @@ class ProvenanceWriter:
         self._writer = pq.ParquetWriter(path, PROVENANCE_SCHEMA, compression="zstd")
         self._rows: dict[str, list[Any]] = {name: [] for name in PROVENANCE_SCHEMA.names}
 
-    def add(
-        self,
-        frame_index: int,
-        key: str,
-        topic: str,
-        tick_ns: int,
-        log_ns: int,
-        header_ns: int | None,
-        stamp_used: str,
-        message_index: int,
-    ) -> None:
+    def add_source(self, frame_index: int, tick_ns: int, source: AlignedSource) -> None:
+        """The message(s) behind ``source``'s value at this frame, with both clocks."""
         rows = self._rows
+        sel = source.selection
+        lo = int(sel.lo[frame_index])
+        hi = int(sel.hi[frame_index]) if sel.hi is not None else -1
+        weight = float(sel.weight[frame_index]) if sel.weight is not None else None
+        header = source.timeline.header_ns
         rows["frame_index"].append(frame_index)
-        rows["key"].append(key)
-        rows["topic"].append(topic)
+        rows["key"].append(source.src.key)
+        rows["topic"].append(source.src.topic)
         rows["tick_ns"].append(tick_ns)
-        rows["source_log_ns"].append(log_ns)
-        rows["source_header_ns"].append(header_ns)
-        rows["stamp_used"].append(stamp_used)
-        rows["message_index"].append(message_index)
+        rows["source_log_ns"].append(int(source.timeline.log_ns[lo]) if lo >= 0 else None)
+        rows["source_header_ns"].append(int(header[lo]) if lo >= 0 and header is not None else None)
+        rows["stamp_used"].append(source.stamp_used)
+        rows["message_index"].append(lo if lo >= 0 else None)
+        rows["message_index_next"].append(hi if hi >= 0 and weight else None)
+        rows["weight"].append(weight if weight else None)
+        rows["fill"].append(source.src.fill if bool(source.filled[frame_index]) else None)
         if len(rows["frame_index"]) >= _BATCH_ROWS * 4:
             self._flush()
 

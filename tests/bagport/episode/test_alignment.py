@@ -1,0 +1,142 @@
+"""Alignment strategies and fill policies, end to end on synthetic bags with known truth."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from bagport.columns import vector_column
+from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.staging import EpisodeSummary
+from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, write_episode_bag
+from bagport.video import iter_frames
+
+FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+NS = 1_000_000_000
+
+
+def _convert(bag: Path, staging: Path, text: str) -> EpisodeSummary:
+    return convert_episode(
+        EpisodeRequest(
+            episode_id_for(str(bag), text, FAST), str(bag), 0, str(staging), text, "c.yaml", FAST, "t"
+        )
+    )
+
+
+def _state_contract(strategy: str) -> str:
+    return f"""\
+robot_type: r
+fps: 30
+observations:
+  - key: observation.state
+    topic: /joint_states
+    type: sensor_msgs/msg/JointState
+    selector: {{names: [j1, j2, j3, j4, j5, j6]}}
+    align: {{strategy: {strategy}}}
+actions:
+  - key: action
+    publish: {{topic: /cmd, type: sensor_msgs/msg/JointState}}
+    selector: {{names: [j1, j2, j3, j4, j5, j6]}}
+"""
+
+
+def test_interpolation_beats_hold_against_the_analytic_truth(tmp_path: Path) -> None:
+    spec = EpisodeSpec(duration_s=2.0, joint_rate_hz=100, cameras=(), task=None, seed=4)
+    truth = write_episode_bag(tmp_path / "ep", "mcap", spec)
+    errors = {}
+    for strategy in ("hold", "interpolate"):
+        summary = _convert(tmp_path / "ep", tmp_path / strategy, _state_contract(strategy))
+        state = vector_column(pq.read_table(Path(summary.dir_uri) / "frames.parquet"), "observation.state")
+        ticks = summary.first_tick_ns + (np.arange(summary.frames) * NS) // 30
+        errors[strategy] = np.abs(state - truth.joint_position(ticks)).max()
+        report = next(r for r in summary.alignment if r["key"] == "observation.state")
+        assert report["strategy"] == strategy
+        if strategy == "interpolate":
+            assert report["interpolated_frames"] > summary.frames // 2
+    # linear interpolation between samples h = 10 ms apart errs by at most max|q''| h^2 / 8
+    # (amplitude <= 1 rad, frequency <= 0.5 Hz), plus float32 storage
+    curvature_bound = (2 * np.pi * 0.5) ** 2 * 0.010**2 / 8
+    assert errors["interpolate"] < curvature_bound + 1e-6
+    assert errors["interpolate"] < errors["hold"] / 20
+
+
+def _camera_contract(fill: str, extra: str = "") -> str:
+    return f"""\
+robot_type: r
+fps: 30
+observations:
+  - key: observation.state
+    topic: /joint_states
+    type: sensor_msgs/msg/JointState
+    selector: {{names: [j1]}}
+  - key: observation.images.front
+    topic: /front/image_raw
+    type: sensor_msgs/msg/Image
+    align: {{strategy: asof, tol_ms: 40, fill: {fill}}}
+{extra}"""
+
+
+@pytest.fixture(scope="module")
+def slow_camera(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, GroundTruth]:
+    root = tmp_path_factory.mktemp("slowcam")
+    spec = EpisodeSpec(
+        duration_s=1.5, cameras=(CameraSpec("front", "raw", rate_hz=5.0, jitter_ns=0),), task=None
+    )
+    return root / "ep", write_episode_bag(root / "ep", "mcap", spec)
+
+
+def test_fill_hold_is_explicit_in_provenance_and_report(
+    tmp_path: Path, slow_camera: tuple[Path, GroundTruth]
+) -> None:
+    bag, _ = slow_camera
+    summary = _convert(bag, tmp_path / "st", _camera_contract("hold"))
+    report = next(r for r in summary.alignment if r["key"] == "observation.images.front")
+    prov = pq.read_table(Path(summary.dir_uri) / "provenance.parquet").to_pylist()
+    fills = [r["fill"] for r in prov if r["key"] == "observation.images.front"]
+    assert report["filled_frames"] == fills.count("hold") > 0
+    assert fills.count(None) == summary.frames - report["filled_frames"]
+
+
+def test_fill_drop_frame_keeps_only_ticks_with_a_fresh_image(
+    tmp_path: Path, slow_camera: tuple[Path, GroundTruth]
+) -> None:
+    bag, truth = slow_camera
+    summary = _convert(bag, tmp_path / "st", _camera_contract("drop_frame"))
+    prov = pq.read_table(Path(summary.dir_uri) / "provenance.parquet").to_pylist()
+    rows = [r for r in prov if r["key"] == "observation.images.front"]
+    assert len(rows) == summary.frames
+    assert all(0 <= r["tick_ns"] - r["source_header_ns"] <= 40_000_000 for r in rows)
+    report = next(r for r in summary.alignment if r["key"] == "observation.images.front")
+    assert report["dropped_frames"] > 0
+    camera = truth.camera_stamps_ns("front")
+    assert (
+        summary.frames + report["dropped_frames"]
+        == 1 + (min(camera[-1], truth.joint_stamps_ns()[-1]) - summary.first_tick_ns) * 30 // NS
+    )
+
+
+def test_fill_zeros_needs_a_size_and_gives_black_frames(
+    tmp_path: Path, slow_camera: tuple[Path, GroundTruth]
+) -> None:
+    bag, _ = slow_camera
+    from bagport.errors import ContractError  # noqa: PLC0415
+
+    with pytest.raises(
+        ContractError, match=r"fill 'zeros' on camera observation\.images\.front needs a known frame size"
+    ):
+        _convert(bag, tmp_path / "st", _camera_contract("zeros"))
+    text = _camera_contract("zeros").replace("fill: zeros}", "fill: zeros}\n    image: {resize: [96, 128]}")
+    summary = _convert(bag, tmp_path / "st", text)
+    prov = pq.read_table(Path(summary.dir_uri) / "provenance.parquet").to_pylist()
+    zero_frames = {
+        r["frame_index"] for r in prov if r["key"] == "observation.images.front" and r["fill"] == "zeros"
+    }
+    assert zero_frames
+    for k, (_, rgb) in enumerate(iter_frames(Path(summary.dir_uri) / "videos/observation.images.front.mp4")):
+        if k in zero_frames:
+            assert rgb.max() < 20
+        else:
+            assert rgb.max() > 200

@@ -91,6 +91,19 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_contract_check(args: argparse.Namespace) -> int:
+    from bagport.contract import load_contract  # noqa: PLC0415
+    from bagport.feature_table import describe_features, format_feature_table  # noqa: PLC0415
+
+    plan = load_contract(args.contract)
+    bags = args.bag or [None]
+    for bag in bags:
+        rows = describe_features(plan, bag)
+        print(f"{args.contract}" + (f" against {bag}" if bag else "") + ": OK")
+        print(format_feature_table(plan, rows))
+    return 0
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     from bagport.synth import write_sample_fleet  # noqa: PLC0415
 
@@ -140,6 +153,15 @@ def _parser() -> argparse.ArgumentParser:
     validate.add_argument("--repo-id", default=None)
     validate.add_argument("--every", type=int, default=1, help="decode every n-th frame (default: all)")
     validate.set_defaults(func=_cmd_validate)
+
+    contract = sub.add_parser("contract", help="work with contracts")
+    contract_sub = contract.add_subparsers(dest="contract_command", required=True)
+    check = contract_sub.add_parser(
+        "check", help="validate a contract, alone or against bags, and print the feature table"
+    )
+    check.add_argument("contract", help="contract YAML")
+    check.add_argument("--bag", action="append", help="check against this bag (repeatable)")
+    check.set_defaults(func=_cmd_contract_check)
 
     synth = sub.add_parser("synth", help="write a synthetic fleet of bags with known ground truth")
     synth.add_argument("--out", required=True, help="folder for the bags and manifest.yaml")

@@ -27,6 +27,7 @@ from bagport.uris import is_local
 __all__ = ["BagReader", "open_bag"]
 
 _HEADER = "std_msgs/msg/Header"
+_SUFFIX = {Storage.ROS1: ".bag", Storage.MCAP: ".mcap", Storage.SQLITE3: ".db3"}
 _ROSBAGS_ERRORS = (AnyReaderError, Ros1ReaderError, Ros2ReaderError)
 
 
@@ -58,9 +59,15 @@ def _custom_data(path: Path) -> dict[str, str]:
 
 
 def _reader_paths(path: Path, storage: Storage, scratch: Path) -> list[Path]:
-    """Paths for AnyReader; a rosbag2 folder named ``*.bag`` is linked under a neutral name."""
+    """Paths for AnyReader, which goes by file name: files whose suffix does not match their content
+    (a ROS 1 bag without ``.bag``, a rosbag2 folder named ``*.bag``) are linked under a fitting name."""
     if path.is_file():
-        return [path]
+        suffix = _SUFFIX[storage]
+        if path.suffix == suffix:
+            return [path]
+        link = scratch / f"bag{suffix}"
+        link.symlink_to(path.resolve())
+        return [link]
     if (path / "metadata.yaml").is_file():
         if path.suffix == ".bag":
             link = scratch / "bag"

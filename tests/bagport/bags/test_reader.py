@@ -121,3 +121,20 @@ def test_folder_named_like_a_ros1_bag_is_read_as_rosbag2(tmp_path: Path) -> None
     with open_bag(str(copy)) as reader:
         assert reader.info.storage is Storage.SQLITE3
         assert [m.msg().encoding for m in reader.messages()] == ["mono8"] * 3
+
+
+@pytest.mark.parametrize(
+    "relative",
+    [
+        "rosbagjs_turtlesim/example.bag",
+        "foxglove_chatter_db3/chatter.db3",
+        "rerun_humble_sensors/rosbag2_2025_09_10-13_03_56_0.mcap",
+    ],
+)
+def test_files_are_read_by_content_whatever_their_name(tmp_path: Path, relative: str) -> None:
+    source = realbag(relative)
+    renamed = tmp_path / "recording.dat"
+    shutil.copyfile(source, renamed)
+    with open_bag(str(source)) as original, open_bag(str(renamed)) as copy:
+        assert copy.info.storage is original.info.storage
+        assert copy.info.message_count == original.info.message_count

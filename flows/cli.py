@@ -104,6 +104,23 @@ def _cmd_contract_check(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_contract_init(args: argparse.Namespace) -> int:
+    from bagport.bags import open_bag  # noqa: PLC0415
+    from bagport.contract.draft import draft_contract  # noqa: PLC0415
+
+    with open_bag(args.bag) as reader:
+        text = draft_contract(reader.info, robot_type=args.robot_type, fps=args.fps)
+    if args.out:
+        out = Path(args.out)
+        if out.exists():
+            raise BagportError(f"{out} already exists; nothing was written. Fix: choose another --out.")
+        out.write_text(text)
+        print(f"wrote {out}", file=sys.stderr)
+    else:
+        print(text, end="")
+    return 0
+
+
 def _cmd_synth(args: argparse.Namespace) -> int:
     from bagport.synth import write_sample_fleet  # noqa: PLC0415
 
@@ -162,6 +179,12 @@ def _parser() -> argparse.ArgumentParser:
     check.add_argument("contract", help="contract YAML")
     check.add_argument("--bag", action="append", help="check against this bag (repeatable)")
     check.set_defaults(func=_cmd_contract_check)
+    init = contract_sub.add_parser("init", help="draft a contract from a bag's topics, for you to edit")
+    init.add_argument("--bag", required=True, help="bag to draft from")
+    init.add_argument("--out", default=None, help="write the draft here (default: print it)")
+    init.add_argument("--robot-type", default="my_robot")
+    init.add_argument("--fps", type=int, default=30)
+    init.set_defaults(func=_cmd_contract_init)
 
     synth = sub.add_parser("synth", help="write a synthetic fleet of bags with known ground truth")
     synth.add_argument("--out", required=True, help="folder for the bags and manifest.yaml")

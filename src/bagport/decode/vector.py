@@ -12,6 +12,7 @@ import numpy.typing as npt
 
 from bagport.contract.plan import SourceSpec
 from bagport.decode.custom import resolve_decoder
+from bagport.decode.defaults import DEFAULT_FIELDS
 from bagport.errors import DecodeError
 from bagport.msgtypes import RosType
 
@@ -22,6 +23,7 @@ _SCALAR_TYPES = frozenset({RosType.FLOAT32, RosType.FLOAT64, RosType.INT32, RosT
 _ARRAY_TYPES = frozenset(
     {RosType.FLOAT32_MULTI_ARRAY, RosType.FLOAT64_MULTI_ARRAY, "std_msgs/msg/Int32MultiArray"}
 )
+_JOY = "sensor_msgs/msg/Joy"
 _PATH_PART = re.compile(r"^([A-Za-z_]\w*)(?:\[(\d+)\])?$")
 
 Vector = npt.NDArray[np.float64]
@@ -125,6 +127,27 @@ def _paths_extractor(src: SourceSpec, paths: tuple[str, ...]) -> VectorExtractor
     return VectorExtractor(paths, extract)
 
 
+def _arrays_extractor(src: SourceSpec, first_msg: Any, fields: tuple[str, ...]) -> VectorExtractor:
+    """Whole array fields, their lengths fixed by the first message."""
+    widths = {name: len(getattr(first_msg, name)) for name in fields}
+
+    def extract(msg: Any) -> Vector:
+        parts = []
+        for name, width in widths.items():
+            values = np.asarray(getattr(msg, name), dtype=np.float64)
+            if values.shape != (width,):
+                raise DecodeError(
+                    f"{name} length changed from {width} to {values.shape[0]}",
+                    topic=src.topic,
+                    fix=f"select fixed elements with selector.names: ['{name}[0]', ...].",
+                )
+            parts.append(values)
+        return np.concatenate(parts) if len(parts) > 1 else parts[0]
+
+    names = tuple(f"{name}[{i}]" for name, width in widths.items() for i in range(width))
+    return VectorExtractor(names, extract)
+
+
 def make_extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
     """Build the extractor for ``src``; the first message fixes unnamed dimensions."""
     if src.decoder is not None:
@@ -149,20 +172,12 @@ def make_extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
         return _paths_extractor(src, src.names)
     if src.msgtype in _SCALAR_TYPES:
         return _paths_extractor(src, ("data",))
+    if src.msgtype in DEFAULT_FIELDS:
+        return _paths_extractor(src, DEFAULT_FIELDS[src.msgtype])
     if src.msgtype in _ARRAY_TYPES:
-        width = len(first_msg.data)
-
-        def extract_array(msg: Any) -> Vector:
-            values = np.asarray(msg.data, dtype=np.float64)
-            if values.shape != (width,):
-                raise DecodeError(
-                    f"array length changed from {width} to {values.shape[0]}",
-                    topic=src.topic,
-                    fix="select fixed elements with selector.names: ['data[0]', ...].",
-                )
-            return values
-
-        return VectorExtractor(tuple(f"data[{i}]" for i in range(width)), extract_array)
+        return _arrays_extractor(src, first_msg, ("data",))
+    if src.msgtype == _JOY:
+        return _arrays_extractor(src, first_msg, ("axes", "buttons"))
     raise DecodeError(
         f"bagport does not know which fields of {src.msgtype} to use for {src.key!r}",
         topic=src.topic,

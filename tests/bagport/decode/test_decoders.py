@@ -92,8 +92,9 @@ def test_scalars_arrays_and_dot_paths() -> None:
     assert ext(arr).tolist() == [3.0]
     with pytest.raises(DecodeError, match="has no field 'linar'"):
         make_extractor(_src("geometry_msgs/msg/Twist", ("linar.x",)), twist)(twist)
-    with pytest.raises(DecodeError, match="does not know which fields of geometry_msgs/msg/Twist"):
-        make_extractor(_src("geometry_msgs/msg/Twist"), twist)
+    log = TS.types["std_msgs/msg/String"](data="x")
+    with pytest.raises(DecodeError, match="does not know which fields of std_msgs/msg/String"):
+        make_extractor(_src("std_msgs/msg/String"), log)
 
 
 def double_it(msg: Any, spec: Any) -> npt.NDArray[Any]:
@@ -177,3 +178,26 @@ def test_resize_keeps_colours() -> None:
     out = resize_rgb(block, 10, 30)
     assert out.shape == (10, 30, 3)
     np.testing.assert_array_equal(out[5, [5, 15, 25]], RGB[0])
+
+
+def test_default_fields_for_common_types_like_rosetta() -> None:
+    imu = TS.types["sensor_msgs/msg/Imu"](
+        header=_header(),
+        orientation=TS.types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0),
+        orientation_covariance=np.zeros(9),
+        angular_velocity=Vector3(x=1.0, y=2.0, z=3.0),
+        angular_velocity_covariance=np.zeros(9),
+        linear_acceleration=Vector3(x=4.0, y=5.0, z=9.81),
+        linear_acceleration_covariance=np.zeros(9),
+    )
+    ext = make_extractor(_src("sensor_msgs/msg/Imu"), imu)
+    assert ext.names[:4] == ("orientation.x", "orientation.y", "orientation.z", "orientation.w")
+    assert ext(imu).tolist() == [0.0, 0.0, 0.0, 1.0, 1.0, 2.0, 3.0, 4.0, 5.0, 9.81]
+    twist = Twist(linear=Vector3(x=1.0, y=2.0, z=3.0), angular=Vector3(x=4.0, y=5.0, z=6.0))
+    assert make_extractor(_src("geometry_msgs/msg/Twist"), twist)(twist).tolist() == [1, 2, 3, 4, 5, 6]
+    joy = TS.types["sensor_msgs/msg/Joy"](
+        header=_header(), axes=np.array([0.5, -0.5], np.float32), buttons=np.array([1, 0, 1], np.int32)
+    )
+    ext = make_extractor(_src("sensor_msgs/msg/Joy"), joy)
+    assert ext.names == ("axes[0]", "axes[1]", "buttons[0]", "buttons[1]", "buttons[2]")
+    assert ext(joy).tolist() == [0.5, -0.5, 1.0, 0.0, 1.0]

@@ -1,0 +1,44 @@
+"""`bagport contract init`: a draft that parses, maps cameras, state, actions and tasks, and lists the rest."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bagport.bags import open_bag
+from bagport.contract import FeatureKind, parse_contract
+from bagport.contract.draft import draft_contract
+from bagport.synth import EpisodeSpec, write_episode_bag
+from flows.cli import main
+from tests.helpers import realbag
+
+
+def test_draft_from_a_teleop_bag_parses_and_maps_every_stream(tmp_path: Path) -> None:
+    write_episode_bag(tmp_path / "ep", "sqlite3", EpisodeSpec(duration_s=0.3))
+    with open_bag(str(tmp_path / "ep")) as reader:
+        text = draft_contract(reader.info, robot_type="arm", fps=15)
+    plan = parse_contract(text, "draft.yaml")
+    kinds = {f.key: f.kind for f in plan.features}
+    assert kinds == {
+        "observation.images.front": FeatureKind.VIDEO,
+        "observation.images.wrist": FeatureKind.VIDEO,
+        "observation.state": FeatureKind.VECTOR,
+        "action": FeatureKind.VECTOR,
+    }
+    assert plan.fps == 15
+    assert [t.topic for t in plan.task_topics] == ["/task_prompt"]
+
+
+def test_draft_lists_what_it_did_not_map_and_cli_refuses_to_overwrite(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    bag = realbag("rosbagjs_turtlesim/example.bag")
+    out = tmp_path / "turtle.yaml"
+    assert main(["contract", "init", "--bag", str(bag), "--out", str(out)]) == 0
+    text = out.read_text()
+    assert "#   /turtle1/pose (turtlesim/msg/Pose)" in text
+    assert "topic: /turtle1/cmd_vel" in text
+    parse_contract(text, str(out))
+    assert main(["contract", "init", "--bag", str(bag), "--out", str(out)]) == 2
+    assert "already exists" in capsys.readouterr().err

@@ -14,6 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bagport.bags import BagReader
+from bagport.errors import BagReadError
 
 __all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_timeline"]
 
@@ -65,6 +66,15 @@ def scan_timeline(reader: BagReader, topics: Iterable[str], task_topics: Iterabl
         if message.topic in log:
             log[message.topic].append(message.log_time_ns)
             header[message.topic].append(message.header_stamp_ns())
+    for topic in feature_topics:
+        promised = reader.info.topic(topic)
+        if promised is not None and promised.count != len(log[topic]):
+            raise BagReadError(
+                f"yielded {len(log[topic])} messages on {topic}, its index promises {promised.count}",
+                uri=reader.info.uri,
+                topic=topic,
+                fix="the bag is truncated or its index is stale: reindex it (`ros2 bag reindex` / `rosbag reindex`).",
+            )
     result: dict[str, TopicTimeline] = {}
     for topic in feature_topics:
         stamps = header[topic]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import numpy as np
@@ -11,7 +12,7 @@ import pytest
 
 from bagport.columns import vector_column
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
-from bagport.errors import AlignmentError, ContractError, DecodeError, ManifestError
+from bagport.errors import AlignmentError, BagReadError, ContractError, DecodeError, ManifestError
 from bagport.staging import read_summary
 from bagport.synth import (
     CameraSpec,
@@ -183,9 +184,20 @@ def test_rerun_reuses_finished_episodes_until_the_bag_changes(tmp_path: Path) ->
     again = convert_episode(_request(bag, tmp_path / "staging"))
     assert again == first
     assert marker.stat().st_mtime_ns == written_ns  # not converted again
-    (bag / "ep.mcap").unlink()
-    write_episode_bag(tmp_path / "other", "mcap", EpisodeSpec(duration_s=0.7, seed=9))
-    (tmp_path / "other" / "other.mcap").rename(bag / "ep.mcap")
+    shutil.rmtree(bag)  # re-recorded under the same name
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.7, seed=9))
     changed = convert_episode(_request(bag, tmp_path / "staging"))
     assert changed.frames != first.frames
     assert changed.source_stamp != first.source_stamp
+
+
+def test_a_short_read_against_the_index_is_an_error_not_a_short_dataset(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5))
+    write_episode_bag(tmp_path / "other", "mcap", EpisodeSpec(duration_s=0.3, seed=9))
+    (bag / "ep.mcap").unlink()
+    (tmp_path / "other" / "other.mcap").rename(bag / "ep.mcap")  # metadata.yaml now promises more
+    with pytest.raises(
+        BagReadError, match=r"yielded \d+ messages on /joint_states, its index promises \d+.*reindex"
+    ):
+        convert_episode(_request(bag, tmp_path / "staging"))

@@ -7,8 +7,10 @@ from pathlib import Path
 from tests.conftest import REALBAGS, REPO
 
 SAMPLE_CONTRACT = REPO / "configs" / "contracts" / "sample_robot.yaml"
+FAST_CODEC = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+"""Near-lossless and quick: for tests that check pixels exactly, not the default codec."""
 
-__all__ = ["REALBAGS", "REPO", "SAMPLE_CONTRACT", "realbag"]
+__all__ = ["FAST_CODEC", "REALBAGS", "REPO", "SAMPLE_CONTRACT", "realbag"]
 
 
 def realbag(relative: str) -> Path:

@@ -14,9 +14,7 @@ from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.errors import DatasetWriteError, ValidationError
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import SAMPLE_CONTRACT
-
-FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
 
 @pytest.fixture(scope="module")
@@ -28,13 +26,13 @@ def staged(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeSummary]:
         bag = root / f"ep{i}"
         write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.4 + 0.1 * i, seed=i, task=f"task {i % 2}"))
         request = EpisodeRequest(
-            episode_id=episode_id_for(str(bag), text, FAST),
+            episode_id=episode_id_for(str(bag), text, FAST_CODEC),
             bag_uri=str(bag),
             manifest_entry=i,
             staging_uri=str(root / "staging"),
             contract_text=text,
             contract_name="sample_robot.yaml",
-            encoder=FAST,
+            encoder=FAST_CODEC,
         )
         summaries.append(convert_episode(request))
     return summaries
@@ -91,7 +89,13 @@ def test_inconsistent_features_are_refused(tmp_path: Path, staged: list[EpisodeS
     text = SAMPLE_CONTRACT.read_text()
     odd = convert_episode(
         EpisodeRequest(
-            episode_id_for(str(other), text, FAST), str(other), 9, str(tmp_path / "st"), text, "c", FAST
+            episode_id_for(str(other), text, FAST_CODEC),
+            str(other),
+            9,
+            str(tmp_path / "st"),
+            text,
+            "c",
+            FAST_CODEC,
         )
     )
     with pytest.raises(

@@ -13,15 +13,22 @@ from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, write_episode_bag
 from bagport.video import iter_frames
+from tests.helpers import FAST_CODEC
 
-FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 NS = 1_000_000_000
 
 
 def _convert(bag: Path, staging: Path, text: str) -> EpisodeSummary:
     return convert_episode(
         EpisodeRequest(
-            episode_id_for(str(bag), text, FAST), str(bag), 0, str(staging), text, "c.yaml", FAST, "t"
+            episode_id_for(str(bag), text, FAST_CODEC),
+            str(bag),
+            0,
+            str(staging),
+            text,
+            "c.yaml",
+            FAST_CODEC,
+            "t",
         )
     )
 

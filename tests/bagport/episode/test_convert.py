@@ -23,9 +23,7 @@ from bagport.synth import (
     write_episode_bag,
 )
 from bagport.video import iter_frames
-from tests.helpers import SAMPLE_CONTRACT, realbag
-
-FAST = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT, realbag
 
 
 def _request(
@@ -33,13 +31,13 @@ def _request(
 ) -> EpisodeRequest:
     text = contract_text if contract_text is not None else SAMPLE_CONTRACT.read_text()
     return EpisodeRequest(
-        episode_id=episode_id_for(str(bag), text, FAST),
+        episode_id=episode_id_for(str(bag), text, FAST_CODEC),
         bag_uri=str(bag),
         manifest_entry=0,
         staging_uri=str(staging),
         contract_text=text,
         contract_name="contract.yaml",
-        encoder=FAST,
+        encoder=FAST_CODEC,
         default_task=task,
     )
 

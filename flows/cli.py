@@ -65,13 +65,44 @@ def _cmd_convert(args: argparse.Namespace) -> int:
         chunks_size=args.chunks_size,
         data_files_size_in_mb=args.data_files_size_in_mb,
         video_files_size_in_mb=args.video_files_size_in_mb,
+        qa=args.qa,
+        on_qa_fail=args.on_qa_fail,
     )
     started = time.perf_counter()
     report = run_convert(config)
     print(summary_json(report))
     wall_s = time.perf_counter() - started
-    print(f"converted {report.duration_s:.1f} s of recordings in {wall_s:.1f} s wall time", file=sys.stderr)
-    return 0
+    for row in report.excluded:
+        print(f"excluded bags[{row['manifest_entry']}] {row['bag_uri']}: {row['reason']}", file=sys.stderr)
+    print(
+        f"converted {report.duration_s:.1f} s of recordings ({report.episodes} episode(s), "
+        f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time; QA report: "
+        f"{report.root.rstrip('/')}/meta/qa/report.html",
+        file=sys.stderr,
+    )
+    return 1 if report.excluded else 0
+
+
+def _cmd_qa(args: argparse.Namespace) -> int:
+    from bagport.episode.score import score_manifest  # noqa: PLC0415
+
+    entries = score_manifest(args.manifest, args.contract, args.qa, workers=args.workers)
+    for entry in entries:
+        qa = entry.qa
+        print(f"{qa.verdict:4s} {qa.score:.2f}  bags[{entry.manifest_entry}] {qa.bag_uri}: {qa.headline()}")
+    if args.report:
+        from bagport.qa.report import render_report  # noqa: PLC0415
+
+        Path(args.report).write_text(
+            render_report(
+                entries, {"manifest": args.manifest, "contract": args.contract, "bags": len(entries)}
+            ),
+            encoding="utf-8",
+        )
+        print(f"report: {args.report}", file=sys.stderr)
+    failing = sum(e.qa.verdict == "fail" for e in entries)
+    print(f"{len(entries) - failing} of {len(entries)} bag(s) pass QA", file=sys.stderr)
+    return 1 if failing else 0
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
@@ -159,7 +190,24 @@ def _parser() -> argparse.ArgumentParser:
     convert.add_argument("--chunks-size", type=int, default=1000)
     convert.add_argument("--data-files-size-in-mb", type=float, default=100)
     convert.add_argument("--video-files-size-in-mb", type=float, default=200)
+    convert.add_argument(
+        "--qa", default=None, help="QA thresholds YAML (default: built-in, see configs/qa.yaml)"
+    )
+    convert.add_argument(
+        "--on-qa-fail",
+        choices=["exclude", "keep", "fail_run"],
+        default=None,
+        help="episodes failing QA or conversion: leave out (default), keep and flag, or fail the run",
+    )
     convert.set_defaults(func=_cmd_convert)
+
+    qa = sub.add_parser("qa", help="score bags against a contract without converting them (no video)")
+    qa.add_argument("--manifest", required=True)
+    qa.add_argument("--contract", required=True)
+    qa.add_argument("--qa", default=None, help="QA thresholds YAML (default: built-in)")
+    qa.add_argument("--report", default=None, help="write a self-contained HTML report here")
+    qa.add_argument("--workers", type=int, default=None, help="bags scored in parallel (default: CPU count)")
+    qa.set_defaults(func=_cmd_qa)
 
     inspect = sub.add_parser("inspect", help="print what `ros2 bag info` prints, without ROS")
     inspect.add_argument("uri", nargs="+", help="bag folder, .mcap, .db3 or .bag (local or fsspec URI)")
@@ -195,6 +243,13 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _episodes_failed(err: BagportError) -> bool:
+    """Exit code 1 (not 2): the input was fine, but episodes failed QA or conversion as configured."""
+    from bagport.errors import QualityError  # noqa: PLC0415
+
+    return isinstance(err, QualityError) or QualityError.MARKER in str(err)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     func: Callable[[argparse.Namespace], int] = args.func
@@ -204,7 +259,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if os.environ.get("BAGPORT_DEBUG") == "1":
             raise
         print(f"bagport {args.command}: error: {err}", file=sys.stderr)
-        return 2
+        return 1 if _episodes_failed(err) else 2
     except KeyboardInterrupt:
         print(f"bagport {args.command}: interrupted", file=sys.stderr)
         return 130

@@ -10,7 +10,7 @@ from typing import Any
 from prefect import flow, get_run_logger
 from prefect.client.schemas.objects import State
 from prefect.events.worker import EventsWorker
-from prefect.futures import wait
+from prefect.futures import as_completed
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
 from prefect.states import Failed
@@ -19,7 +19,8 @@ from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTa
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.errors import BagportError
-from bagport.run import plan_run
+from bagport.run import EpisodeFailure, plan_run
+from flows.artifacts import Progress, publish_run_artifacts
 from tasks.episode import convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
@@ -43,29 +44,36 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         convert_episode_task.submit(request.to_dict(), label=_label(request.bag_uri))
         for request in plan.requests
     ]
-    wait(futures)
+    progress = Progress(len(futures))
+    for _ in as_completed(futures):
+        progress.advance()
     staged: list[dict[str, Any]] = []
-    failures: list[str] = []
+    failures: list[EpisodeFailure] = []
     for request, future in zip(plan.requests, futures, strict=True):
         state = future.state
         if state.is_completed():
-            staged.append(state.result())
+            result = future.result()
+            assert isinstance(result, dict)  # completed: the task returned its summary
+            staged.append(result)
             continue
         # A bad bag's task ends Failed with bagport's one-paragraph error as its message.
-        failures.append(f"- bags[{request.manifest_entry}] {request.bag_uri}: {state.message or state.name}")
-    if failures:
-        message = (
-            f"{len(failures)} of {len(plan.requests)} bag(s) failed; nothing was written at {config.output} "
-            f"({len(staged)} converted episode(s) are kept in the staging store {config.resolved_staging()}).\n"
-            + "\n".join(failures)
+        failures.append(
+            EpisodeFailure(request.bag_uri, request.manifest_entry, state.message or str(state.name))
         )
-        logger.error(message)
-        return Failed(message=message)
-    logger.info("all %d episode(s) staged; writing the dataset", len(staged))
-    reduced = reduce_task(plan, staged, return_state=True)
+    if failures:
+        logger.warning(
+            "%d of %d bag(s) failed; the QA policy (on_fail: %s) decides what happens to the run:\n%s",
+            len(failures),
+            len(plan.requests),
+            plan.qa.on_fail,
+            "\n".join(f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures),
+        )
+    logger.info("%d episode(s) staged; writing the dataset", len(staged))
+    reduced = reduce_task(plan, staged, failures, return_state=True)
     if not reduced.is_completed():
         return Failed(message=reduced.message or "writing the dataset failed")
     report: DatasetReport = reduced.result()  # type: ignore[assignment] # completed: a report
+    publish_run_artifacts(report)
     return report
 
 

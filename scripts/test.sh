@@ -3,6 +3,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/env.sh
+bash scripts/setup_browser.sh
 .venv/bin/ruff check src tasks flows tests bench
 .venv/bin/ruff format --check src tasks flows tests bench
 .venv/bin/mypy src/bagport tasks flows tests bench

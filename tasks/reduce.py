@@ -10,18 +10,23 @@ from prefect.states import Failed
 
 from bagport.dataset import DatasetReport
 from bagport.errors import BagportError
-from bagport.run import RunPlan, reduce_run
+from bagport.run import EpisodeFailure, RunPlan, reduce_run
 
 __all__ = ["reduce_task"]
 
 
 @task(name="write-dataset")
-def reduce_task(plan: RunPlan, staged: list[dict[str, Any]]) -> DatasetReport | State[Any]:
+def reduce_task(
+    plan: RunPlan, staged: list[dict[str, Any]], failures: list[EpisodeFailure]
+) -> DatasetReport | State[Any]:
     """Ends Failed with bagport's one-paragraph error as the message when the dataset cannot be written."""
     try:
-        report = reduce_run(plan, [item["dir_uri"] for item in staged])
+        report = reduce_run(plan, [item["dir_uri"] for item in staged], failures)
     except BagportError as err:
         get_run_logger().error("%s", err)
         return Failed(message=str(err))
-    get_run_logger().info("wrote %d episode(s), %d frames to %s", report.episodes, report.frames, report.root)
+    logger = get_run_logger()
+    logger.info("wrote %d episode(s), %d frames to %s", report.episodes, report.frames, report.root)
+    for row in report.excluded:
+        logger.warning("excluded %s: %s", row["bag_uri"], row["reason"])
     return report

@@ -41,6 +41,12 @@ class ConvertConfig(BaseModel):
     video_files_size_in_mb: PositiveFloat = 200
     overwrite: bool = False
     keep_staging: bool = False
+    qa: str | None = Field(
+        default=None, description="QA thresholds YAML (see configs/qa.yaml); default: built-in."
+    )
+    on_qa_fail: Literal["exclude", "keep", "fail_run"] | None = Field(
+        default=None, description="Override the QA file's on_fail: exclude, keep (and flag) or fail_run."
+    )
 
     def resolved_repo_id(self) -> str:
         name = self.output.rstrip("/").rsplit("/", 1)[-1] or "dataset"

@@ -16,6 +16,7 @@ __all__ = [
     "DatasetWriteError",
     "DecodeError",
     "ManifestError",
+    "QualityError",
     "TransientError",
     "ValidationError",
     "VideoError",
@@ -136,6 +137,16 @@ class VideoError(BagportError):
 
 class DatasetWriteError(BagportError):
     """Writing the LeRobot dataset failed; the output folder was left untouched."""
+
+
+class QualityError(BagportError):
+    """Episodes failed QA (or conversion) and the QA policy says the run fails.
+
+    The message always contains :attr:`MARKER`, so the CLI can tell this outcome (exit code 1)
+    from bad input (exit code 2) after the error crossed a Prefect state as text.
+    """
+
+    MARKER = "failed QA or conversion"
 
 
 class ValidationError(BagportError):

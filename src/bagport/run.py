@@ -20,12 +20,14 @@ from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.episode import EpisodeRequest, episode_id_for
-from bagport.errors import ContractError, DatasetWriteError
+from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest
-from bagport.staging import EpisodeSummary, read_summary
+from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
+from bagport.staging import QA_FILE, EpisodeSummary, read_summary
+from bagport.uris import read_text
 from bagport.video import EncoderSettings
 
-__all__ = ["RunPlan", "plan_run", "reduce_run"]
+__all__ = ["EpisodeFailure", "RunPlan", "plan_run", "reduce_run"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -35,14 +37,16 @@ class RunPlan:
     manifest: Manifest
     requests: tuple[EpisodeRequest, ...]
     contract_text: str
+    qa: QAConfig
 
 
-def _read(uri: str, what: str) -> str:
-    try:
-        with fsspec.open(uri, "r", encoding="utf-8") as handle:
-            return str(handle.read())
-    except FileNotFoundError as err:
-        raise ContractError(f"{what} file does not exist", file=uri, fix=f"check the --{what} path.") from err
+@dataclass(frozen=True, slots=True)
+class EpisodeFailure:
+    """A bag whose conversion failed: its request and bagport's one-paragraph error."""
+
+    bag_uri: str
+    manifest_entry: int
+    error: str
 
 
 def plan_run(config: ConvertConfig) -> RunPlan:
@@ -51,9 +55,12 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     Everything that can be checked without reading bags is checked here, before
     any work starts, and the output must not exist unless ``overwrite``.
     """
-    contract_text = _read(config.contract, "contract")
+    contract_text = read_text(config.contract, "contract")
     contract = parse_contract(contract_text, config.contract)
     EncoderSettings.from_dict(config.encoder)
+    qa = load_qa_config(read_text(config.qa, "qa") if config.qa else None, config.qa or "qa.yaml")
+    if config.on_qa_fail is not None:
+        qa = qa.model_copy(update={"on_fail": config.on_qa_fail})
     manifest = load_manifest(config.manifest)
     fs, out_path = url_to_fs(config.output)
     if fs.exists(out_path) and not config.overwrite:
@@ -73,10 +80,11 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             encoder=dict(config.encoder),
             default_task=bag.task,
             metadata=bag.metadata,
+            qa=qa.model_dump(mode="json"),
         )
         for bag in manifest.bags
     )
-    return RunPlan(config, contract, manifest, requests, contract_text)
+    return RunPlan(config, contract, manifest, requests, contract_text, qa)
 
 
 def run_record(plan: RunPlan) -> dict[str, Any]:
@@ -90,8 +98,64 @@ def run_record(plan: RunPlan) -> dict[str, Any]:
     }
 
 
-def reduce_run(plan: RunPlan, staged_dirs: Sequence[str]) -> DatasetReport:
-    """Read the staged summaries (in manifest order) and write the dataset."""
+def _read_qa(summary: EpisodeSummary) -> EpisodeQA:
+    try:
+        with fsspec.open(summary.file(QA_FILE), "r", encoding="utf-8") as handle:
+            return EpisodeQA.from_dict(json.load(handle))
+    except FileNotFoundError as err:
+        raise DatasetWriteError(
+            f"staged episode {summary.dir_uri} has no {QA_FILE} (staged by an older bagport); re-run the conversion."
+        ) from err
+
+
+def select_episodes(
+    plan: RunPlan, summaries: Sequence[EpisodeSummary], failures: Sequence[EpisodeFailure]
+) -> tuple[list[EpisodeSummary], list[QAEntry]]:
+    """Apply the QA policy: which staged episodes go into the dataset, and every bag's QA entry.
+
+    ``exclude`` leaves out failing episodes and failed bags (listed with the reason), ``keep``
+    keeps failing episodes (flagged in ``meta/qa``), ``fail_run`` stops before anything is written.
+    """
+    policy = plan.qa.on_fail
+    rows: list[tuple[int, EpisodeQA, EpisodeSummary | None]] = [
+        (s.manifest_entry, _read_qa(s), s) for s in summaries
+    ]
+    rows += [(f.manifest_entry, EpisodeQA.failed(f.bag_uri, f.error), None) for f in failures]
+    rows.sort(key=lambda row: row[0])
+    failing = [(entry, qa) for entry, qa, summary in rows if qa.verdict == "fail" and summary is not None]
+    if policy == "fail_run" and (failing or failures):
+        lines = [f"- bags[{entry}] {qa.bag_uri}: {qa.headline()}" for entry, qa in failing]
+        lines += [f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures]
+        raise QualityError(
+            f"{len(lines)} of {len(rows)} bag(s) {QualityError.MARKER} and on_fail is 'fail_run'; nothing was "
+            f"written at {plan.config.output}.\n" + "\n".join(lines),
+        )
+    kept: list[EpisodeSummary] = []
+    entries: list[QAEntry] = []
+    for entry, qa, summary in rows:
+        if summary is None:
+            entries.append(QAEntry(qa, entry, None, f"conversion failed: {qa.error}"))
+        elif qa.verdict == "fail" and policy == "exclude":
+            entries.append(QAEntry(qa, entry, None, f"excluded by QA: {qa.headline()}"))
+        else:
+            entries.append(QAEntry(qa, entry, len(kept)))
+            kept.append(summary)
+    if not kept:
+        reasons = "\n".join(
+            f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries
+        )
+        raise QualityError(
+            f"no episode is left to write: all {len(entries)} bag(s) {QualityError.MARKER}.\n{reasons}\n"
+            "Fix: look at the reasons above; relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep "
+            "failing episodes."
+        )
+    return kept, entries
+
+
+def reduce_run(
+    plan: RunPlan, staged_dirs: Sequence[str], failures: Sequence[EpisodeFailure] = ()
+) -> DatasetReport:
+    """Read the staged summaries, apply the QA policy, and write the dataset (manifest order)."""
     summaries: list[EpisodeSummary] = []
     for uri in staged_dirs:
         summary = read_summary(uri)
@@ -100,18 +164,23 @@ def reduce_run(plan: RunPlan, staged_dirs: Sequence[str]) -> DatasetReport:
                 f"staged episode {uri} is incomplete (no episode.json); re-run the conversion."
             )
         summaries.append(summary)
+    kept, entries = select_episodes(plan, summaries, failures)
     limits = DatasetLimits(
         chunks_size=plan.config.chunks_size,
         data_files_size_in_mb=plan.config.data_files_size_in_mb,
         video_files_size_in_mb=plan.config.video_files_size_in_mb,
     )
+    record = run_record(plan)
+    record["excluded"] = [e.brief() for e in entries if e.episode_index is None]
     report = write_dataset(
-        summaries,
+        kept,
         plan.config.output,
         robot_type=plan.contract.robot_type,
         limits=limits,
-        run_record=run_record(plan),
+        run_record=record,
         overwrite=plan.config.overwrite,
+        qa=entries,
+        qa_config=plan.qa.model_dump(mode="json"),
     )
     if not plan.config.keep_staging:
         fs, path = url_to_fs(plan.config.resolved_staging())
@@ -137,6 +206,7 @@ def summary_json(report: DatasetReport) -> str:
             "tasks": list(report.tasks),
             "videos": list(report.video_keys),
             "size_bytes": report.size_bytes,
+            "excluded": list(report.excluded),
         },
         indent=2,
     )

@@ -3,6 +3,7 @@
 ```
 <staging>/episodes/<episode_id>/
     frames.parquet        timestamp, frame_index, task, one column per vector feature
+    qa.json               QA checks (value, verdict, reason), score, and small series for the report
     provenance.parquet    per frame and source: topic, log time, header stamp, stamp used
     stats.json            per-feature stats partials (+ pixel histograms for videos)
     videos/<key>.mp4      one clip per camera, pts = frame index
@@ -36,6 +37,7 @@ EPISODE_SUMMARY = "episode.json"
 FRAMES_FILE = "frames.parquet"
 PROVENANCE_FILE = "provenance.parquet"
 STATS_FILE = "stats.json"
+QA_FILE = "qa.json"
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,6 +78,9 @@ class EpisodeSummary:
     default_task: str | None = None
     alignment: list[dict[str, Any]] = field(default_factory=list)
     """Per source: stamp, strategy, fill, alignment error (ms), held/interpolated/filled/dropped frames."""
+    qa: dict[str, Any] = field(default_factory=dict)
+    """QA score, verdict and the checks that did not pass (the full record is ``qa.json``)."""
+    qa_sha256: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

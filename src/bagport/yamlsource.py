@@ -7,6 +7,7 @@ error can point at the exact place in the user's file.
 
 from __future__ import annotations
 
+import difflib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -15,7 +16,7 @@ import pydantic
 import yaml
 from pydantic_core import ErrorDetails
 
-__all__ = ["YamlSource", "load_yaml", "primary_error"]
+__all__ = ["ValidationProblem", "YamlSource", "explain_validation", "load_yaml", "primary_error"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -63,3 +64,66 @@ def primary_error(err: pydantic.ValidationError) -> ErrorDetails:
     missing) and the unknown one names the typo."""
     errors = err.errors()
     return next((e for e in errors if e["type"] == "extra_forbidden"), errors[0])
+
+
+@dataclass(frozen=True, slots=True)
+class ValidationProblem:
+    """The first problem of a pydantic error, placed in the user's file."""
+
+    what: str
+    line: int | None
+    field: str
+    fix: str
+
+
+def explain_validation(
+    err: pydantic.ValidationError, source: YamlSource, model: type[pydantic.BaseModel], default_fix: str
+) -> ValidationProblem:
+    """What is wrong, on which line, and how to fix it (nearest valid key for a typo)."""
+    errors = err.errors()
+    first = primary_error(err)
+    loc = tuple(first["loc"])
+    field = ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in loc).replace(".[", "[")
+    msg = first["msg"].removeprefix("Value error, ")
+    if first["type"] == "missing":
+        msg = "required field is missing"
+    elif first["type"] == "extra_forbidden":
+        msg = "unknown field"
+    more = f" ({len(errors) - 1} more problem(s) after this one)" if len(errors) > 1 else ""
+    fix = _suggest(model, loc, first["type"]) or default_fix
+    return ValidationProblem(msg + more, source.line_of(loc), field, fix)
+
+
+def _suggest(model: type[pydantic.BaseModel], loc: tuple[int | str, ...], err_type: str) -> str:
+    if err_type != "extra_forbidden" or not loc:
+        return ""
+    name = str(loc[-1])
+    known = _known_fields(model, loc[:-1])
+    close = difflib.get_close_matches(name, known, n=1)
+    if close:
+        return f"did you mean '{close[0]}'?"
+    return f"remove it; allowed here: {', '.join(sorted(known))}."
+
+
+def _known_fields(model: type[pydantic.BaseModel], parent: tuple[int | str, ...]) -> list[str]:
+    for part in parent:
+        if isinstance(part, int):
+            continue
+        field = model.model_fields.get(str(part))
+        if field is None:
+            return []
+        inner = _model_in(field.annotation)
+        if inner is None:
+            return []
+        model = inner
+    return list(model.model_fields)
+
+
+def _model_in(annotation: object) -> type[pydantic.BaseModel] | None:
+    if isinstance(annotation, type) and issubclass(annotation, pydantic.BaseModel):
+        return annotation
+    for arg in getattr(annotation, "__args__", ()):
+        found = _model_in(arg)
+        if found is not None:
+            return found
+    return None

@@ -1,7 +1,9 @@
-"""Bad input stops with one clear paragraph (what, where, how to fix), exit code 2, and no dataset."""
+"""Bad input stops with one clear paragraph (what, where, how to fix) and exit code 2; a bad bag among
+good ones is excluded and named (exit code 1)."""
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -64,9 +66,7 @@ def test_existing_output_is_not_touched(tmp_path: Path, capfd: pytest.CaptureFix
 
 
 @pytest.mark.slow
-def test_bag_without_a_contract_topic_fails_the_run_and_names_it(
-    tmp_path: Path,
-) -> None:
+def test_a_bad_bag_is_excluded_and_named_the_rest_is_written(tmp_path: Path) -> None:
     write_episode_bag(tmp_path / "good", "mcap", EpisodeSpec(duration_s=0.5))
     write_episode_bag(
         tmp_path / "no_wrist.bag", "ros1", EpisodeSpec(duration_s=0.5, cameras=(CameraSpec("front", "raw"),))
@@ -75,21 +75,37 @@ def test_bag_without_a_contract_topic_fails_the_run_and_names_it(
     manifest.write_text("bags:\n  - uri: good\n  - uri: no_wrist.bag\n")
     out = tmp_path / "out"
     # A fresh process, as a user runs it (Prefect binds its console handler once per process).
-    proc = subprocess.run(
-        [sys.executable, "-m", "flows.cli", *_convert(manifest, SAMPLE_CONTRACT, out), "--runner", "thread"],
-        capture_output=True,
-        text=True,
-        check=False,
-        cwd=REPO,
-    )
+    command = [
+        sys.executable,
+        "-m",
+        "flows.cli",
+        *_convert(manifest, SAMPLE_CONTRACT, out),
+        "--runner",
+        "thread",
+    ]
+    proc = subprocess.run(command, capture_output=True, text=True, check=False, cwd=REPO)
     code, err = proc.returncode, proc.stderr
     assert "Traceback" not in err
-    assert code == 2
-    assert "1 of 2 bag(s) failed; nothing was written" in err
-    assert "bags[1]" in err
+    assert code == 1, err
+    assert "excluded bags[1]" in err
     assert "topic /wrist/image_raw/compressed (for 'observation.images.wrist') is not in bag" in err
-    assert "no_wrist.bag" in err
     assert "Fix: fix the topic name in the contract, or remove this bag from the manifest." in err
-    assert not out.exists()
-    # the episode that converted is kept, so nothing already done is lost
-    assert len(list((tmp_path / "out.staging" / "episodes").glob("good-*/episode.json"))) == 1
+    assert "1 episode(s), 1 excluded" in err
+    summary = json.loads((out / "meta/qa/summary.json").read_text())
+    assert [(e["episode_index"], e["excluded"]) for e in summary["episodes"]] == [(0, False), (None, True)]
+
+    # --on-qa-fail fail_run: nothing is written, the bad bag is named, and converted episodes are kept.
+    strict = tmp_path / "strict"
+    proc = subprocess.run(
+        [sys.executable, "-m", "flows.cli", *_convert(manifest, SAMPLE_CONTRACT, strict), "--runner", "thread",
+         "--on-qa-fail", "fail_run"],
+        capture_output=True, text=True, check=False, cwd=REPO,
+    )  # fmt: skip
+    assert "Traceback" not in proc.stderr
+    assert proc.returncode == 1, proc.stderr
+    assert (
+        "1 of 2 bag(s) failed QA or conversion and on_fail is 'fail_run'; nothing was written" in proc.stderr
+    )
+    assert "bags[1]" in proc.stderr
+    assert not strict.exists()
+    assert len(list((tmp_path / "strict.staging" / "episodes").glob("good-*/episode.json"))) == 1

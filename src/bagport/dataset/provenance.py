@@ -65,6 +65,7 @@ def write_provenance(
             "task_source": s.task_source,
             "stamp_sources": s.stamp_sources,
             "alignment": s.alignment,
+            "qa": s.qa,
             "metadata": s.metadata,
         }
         for i, s in enumerate(summaries)

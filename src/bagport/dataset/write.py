@@ -18,8 +18,10 @@ from fsspec.core import url_to_fs
 from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
+from bagport.dataset.qa import write_qa
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
+from bagport.qa import QAEntry
 from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
 from bagport.uris import is_local
 
@@ -35,6 +37,10 @@ class DatasetReport:
     video_keys: tuple[str, ...]
     size_bytes: int
     duration_s: float
+    excluded: tuple[dict[str, Any], ...] = ()
+    """Bags left out (QA failure or conversion error), with the reason."""
+    qa: tuple[dict[str, Any], ...] = ()
+    """Every bag's QA brief: episode index (None when excluded), score, verdict, reason."""
 
 
 def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeature, ...]:
@@ -81,6 +87,8 @@ def _build(
     robot_type: str,
     limits: DatasetLimits,
     run_record: dict[str, Any],
+    qa: Sequence[QAEntry],
+    qa_config: dict[str, Any],
 ) -> DatasetReport:
     features = _check_consistent(summaries)
     fps = summaries[0].fps
@@ -123,8 +131,27 @@ def _build(
     write_meta(root, summaries, features, tasks, data, videos, episode_stats, info)
     write_provenance(root, summaries, data, run_record)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+    facts = {
+        "episodes": len(summaries),
+        "excluded": sum(e.episode_index is None for e in qa),
+        "frames": total_frames,
+        "duration_s": round(total_frames / fps, 2),
+        "fps": fps,
+        "tasks": "; ".join(tasks),
+        "size_mb": round(size / 1e6, 2),
+    }
+    if qa:
+        write_qa(root, qa, facts, qa_config)
     return DatasetReport(
-        str(root), len(summaries), total_frames, tuple(tasks), tuple(video_keys), size, total_frames / fps
+        str(root),
+        len(summaries),
+        total_frames,
+        tuple(tasks),
+        tuple(video_keys),
+        size,
+        total_frames / fps,
+        tuple(e.brief() for e in qa if e.episode_index is None),
+        tuple(e.brief() for e in qa),
     )
 
 
@@ -136,6 +163,8 @@ def write_dataset(
     limits: DatasetLimits | None = None,
     run_record: dict[str, Any] | None = None,
     overwrite: bool = False,
+    qa: Sequence[QAEntry] = (),
+    qa_config: dict[str, Any] | None = None,
 ) -> DatasetReport:
     """Write the dataset at ``output`` (the dataset root).
 
@@ -159,7 +188,7 @@ def write_dataset(
         build_root = Path(tempfile.mkdtemp(prefix="bagport-dataset-")) / "dataset"
     build_root.mkdir(parents=True)
     try:
-        report = _build(build_root, summaries, robot_type, limits, run_record or {})
+        report = _build(build_root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {})
         if local:
             _swap_into_place(build_root, final)
         else:
@@ -180,6 +209,8 @@ def write_dataset(
         report.video_keys,
         report.size_bytes,
         report.duration_s,
+        report.excluded,
+        report.qa,
     )
 
 

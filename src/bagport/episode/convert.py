@@ -19,15 +19,18 @@ from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
 from bagport.episode.checks import bag_fingerprint, check_bag_fits
+from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.sinks import FrameTableWriter, ProvenanceWriter
 from bagport.episode.tasks import resolve_tasks
 from bagport.episode.timeline import scan_timeline
 from bagport.errors import DecodeError
+from bagport.qa import EpisodeQA, QAConfig, ValueMonitor
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,
     PROVENANCE_FILE,
+    QA_FILE,
     STATS_FILE,
     EpisodeSummary,
     StagedFeature,
@@ -48,6 +51,7 @@ class _EpisodeSinks:
     plan: ContractPlan
     settings: EncoderSettings
     frame_tasks: list[str]
+    monitor: ValueMonitor
 
     def __post_init__(self) -> None:
         vector_dtypes = {f.key: f.dtype for f in self.plan.features if f.kind is FeatureKind.VECTOR}
@@ -73,6 +77,7 @@ class _EpisodeSinks:
                 self.image_stats[key] = ImageStatsAccumulator()
             encoder.write(rgb)
             self.image_stats[key].update(rgb)
+            self.monitor.add_image(frame.index, key, rgb)
         for key, vec in frame.vectors.items():
             width = self.widths.setdefault(key, vec.shape[0])
             if vec.shape[0] != width:
@@ -81,6 +86,7 @@ class _EpisodeSinks:
                     t_ns=frame.tick_ns,
                     fix="select a fixed set of dimensions with selector.names.",
                 )
+        self.monitor.add_vectors(frame.index, frame.vectors)
         for source in frame.sources:
             self.provenance.add_source(frame.index, frame.tick_ns, source)
         self.frames.add(frame.index, self.frame_tasks[frame.index], frame.vectors)
@@ -112,11 +118,21 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
         try:
-            sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks)
+            qa_config = QAConfig.model_validate(request.qa)
+            monitor = ValueMonitor(qa_config.values, plan.fps, int(ticks.size))
+            sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks, monitor)
             try:
                 assemble_frames(reader, request.bag_uri, plan.features, sources, ticks, sinks.on_frame)
             finally:
                 clips = sinks.close()
+            extra = [
+                *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
+                task_check(qa_config, frame_tasks),
+            ]
+            qa = assess_episode(
+                request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps
+            )
+            (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
             features = _staged_features(plan, sources, sinks, clips, settings)
             stats: dict[str, Any] = {}
             table = pq.read_table(
@@ -151,11 +167,26 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 source_stamp=stamp,
                 default_task=request.default_task,
                 alignment=alignment,
+                qa=qa_brief(qa),
+                qa_sha256=request.qa_sha256,
             )
             _publish(workdir, target, summary)
         finally:
             shutil.rmtree(workdir, ignore_errors=True)
     return summary
+
+
+def qa_brief(qa: EpisodeQA) -> dict[str, Any]:
+    """The part of an episode's QA the reduce step and the flow need: score, verdict, problems."""
+    return {
+        "score": qa.score,
+        "verdict": qa.verdict,
+        "headline": qa.headline(),
+        "problems": [
+            {"check": c.check, "subject": c.subject, "verdict": c.verdict, "reason": c.reason}
+            for c in qa.problems
+        ],
+    }
 
 
 def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
@@ -173,6 +204,7 @@ def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
         and existing.bag_uri == request.bag_uri
         and existing.contract_sha256 == request.contract_sha256
         and existing.default_task == request.default_task
+        and existing.qa_sha256 == request.qa_sha256
     )
     if not same:
         return None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
@@ -20,6 +21,8 @@ class EpisodeRequest:
     encoder: dict[str, Any] = field(default_factory=dict)
     default_task: str | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
+    qa: dict[str, Any] = field(default_factory=dict)
+    """QA thresholds (a :class:`bagport.qa.QAConfig` as a dict); empty: the defaults."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -27,6 +30,10 @@ class EpisodeRequest:
     @property
     def contract_sha256(self) -> str:
         return hashlib.sha256(self.contract_text.encode()).hexdigest()
+
+    @property
+    def qa_sha256(self) -> str:
+        return hashlib.sha256(json.dumps(self.qa, sort_keys=True).encode()).hexdigest()
 
 
 def episode_id_for(bag_uri: str, contract_text: str, encoder: dict[str, Any]) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from bagport.synth.faults import Faults, Window
 from bagport.synth.pixels import bar_means, decode_frame_index, expected_bar_colours, render_frame
 from bagport.synth.spec import CameraSpec, EpisodeSpec
 from bagport.synth.truth import GroundTruth
@@ -10,8 +11,10 @@ from bagport.synth.write import SynthStorage, write_episode_bag, write_sample_fl
 __all__ = [
     "CameraSpec",
     "EpisodeSpec",
+    "Faults",
     "GroundTruth",
     "SynthStorage",
+    "Window",
     "bar_means",
     "decode_frame_index",
     "expected_bar_colours",

@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Literal
+
+from bagport.synth.faults import Faults
 
 __all__ = ["CameraSpec", "EpisodeSpec"]
 
@@ -50,6 +52,7 @@ class EpisodeSpec:
     cameras: tuple[CameraSpec, ...] = DEFAULT_CAMERAS
     task: str | None = "pick up the red cube"
     seed: int = 0
+    faults: Faults = field(default_factory=Faults)
 
     JOINT_TOPIC = "/joint_states"
     ACTION_TOPIC = "/cmd"

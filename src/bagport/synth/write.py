@@ -46,6 +46,7 @@ class _Messages:
         self.image = types["sensor_msgs/msg/Image"]
         self.compressed = types["sensor_msgs/msg/CompressedImage"]
         self.string = types["std_msgs/msg/String"]
+        self.bool = types["std_msgs/msg/Bool"]
 
     def header(self, stamp_ns: int, seq: int, frame_id: str) -> Any:
         stamp = self._time(sec=stamp_ns // NS, nanosec=stamp_ns % NS)
@@ -69,8 +70,23 @@ def _raw_bytes(rgb: npt.NDArray[np.uint8], encoding: str) -> tuple[npt.NDArray[n
     return np.ascontiguousarray(out).ravel(), out.shape[1] * out.shape[2]
 
 
-def _camera_message(msgs: _Messages, cam: CameraSpec, k: int, stamp_ns: int, rng: np.random.Generator) -> Any:
-    rgb = render_frame(cam.height, cam.width, k, rng, cam.noise)
+def _camera_pixels(
+    spec: EpisodeSpec, cam: CameraSpec, k: int, stamp_ns: int, rng: np.random.Generator
+) -> npt.NDArray[np.uint8]:
+    faults = spec.faults
+    black, frozen = faults.black_frames, faults.frozen_camera
+    if black is not None and black.camera == cam.name and black.contains(stamp_ns, spec.start_ns):
+        return np.zeros((cam.height, cam.width, 3), dtype=np.uint8)
+    if frozen is not None and frozen.camera == cam.name and frozen.contains(stamp_ns, spec.start_ns):
+        k = round(frozen.start_s * cam.rate_hz)  # the frame captured when the driver stalled, without noise
+        return render_frame(cam.height, cam.width, k, np.random.default_rng(k), cam.noise)
+    return render_frame(cam.height, cam.width, k, rng, cam.noise)
+
+
+def _camera_message(
+    msgs: _Messages, spec: EpisodeSpec, cam: CameraSpec, k: int, stamp_ns: int, rng: np.random.Generator
+) -> Any:
+    rgb = _camera_pixels(spec, cam, k, stamp_ns, rng)
     header = msgs.header(stamp_ns, k, cam.name)
     if cam.kind == "raw":
         data, step = _raw_bytes(rgb, cam.encoding)
@@ -93,17 +109,31 @@ def _camera_message(msgs: _Messages, cam: CameraSpec, k: int, stamp_ns: int, rng
     return msgs.compressed(header=header, format=fmt, data=np.frombuffer(payload, dtype=np.uint8))
 
 
-def _joint_message(msgs: _Messages, truth: GroundTruth, k: int, stamp_ns: int) -> Any:
+def _joint_position(truth: GroundTruth, stamp_ns: int) -> npt.NDArray[np.float64]:
+    spec, faults = truth.spec, truth.spec.faults
+    frozen = faults.frozen_joints
+    if frozen is not None and frozen.contains(stamp_ns, spec.start_ns):
+        stamp_ns = spec.start_ns + round(frozen.start_s * NS)
+    pos = truth.joint_position(stamp_ns).copy()
+    t_s = (stamp_ns - spec.start_ns) / NS
+    if faults.joint_spike is not None and faults.joint_spike[0] <= t_s < faults.joint_spike[0] + 0.1:
+        pos += faults.joint_spike[1]
+    if faults.joint_nan_at_s is not None and faults.joint_nan_at_s <= t_s < faults.joint_nan_at_s + 0.05:
+        pos[:] = np.nan
+    return pos
+
+
+def _joint_message(msgs: _Messages, truth: GroundTruth, k: int, stamp_ns: int, header_ns: int) -> Any:
     names = list(truth.spec.joint_names)
     pos, vel, eff = (
-        truth.joint_position(stamp_ns),
+        _joint_position(truth, stamp_ns),
         truth.joint_velocity(stamp_ns),
         truth.joint_effort(stamp_ns),
     )
     if k % 2:  # the order of names differs between messages: consumers must select by name
         names, pos, vel, eff = names[::-1], pos[::-1], vel[::-1], eff[::-1]
     return msgs.joint_state(
-        header=msgs.header(stamp_ns, k, "base"),
+        header=msgs.header(header_ns, k, "base"),
         name=names,
         position=np.ascontiguousarray(pos, dtype=np.float64),
         velocity=np.ascontiguousarray(vel, dtype=np.float64),
@@ -129,9 +159,16 @@ def _events(truth: GroundTruth) -> Iterator[tuple[int, str, int, int]]:
         events.append((stamp + spec.joint_latency_ns, spec.JOINT_TOPIC, k, stamp))
     for k, stamp in enumerate(truth.action_stamps_ns().tolist()):
         events.append((stamp + spec.action_latency_ns, spec.ACTION_TOPIC, k, stamp))
+    dropout = spec.faults.camera_dropout
     for cam in spec.cameras:
         for k, stamp in enumerate(truth.camera_stamps_ns(cam.name).tolist()):
+            if dropout is not None and dropout.camera == cam.name and dropout.contains(stamp, spec.start_ns):
+                continue
             events.append((stamp + cam.latency_ns, cam.topic, k, stamp))
+    if spec.faults.estop_at_s is not None:
+        for k in range(int(spec.duration_s * 10) + 1):
+            stamp = spec.start_ns + k * NS // 10
+            events.append((stamp, spec.faults.ESTOP_TOPIC, k, stamp))
     if spec.task is not None:
         events.append((truth.task_stamp_ns, spec.TASK_TOPIC, 0, truth.task_stamp_ns))
     events.sort()
@@ -147,6 +184,9 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
     types.update({cam.topic: cam.msgtype for cam in spec.cameras})
     if spec.task is not None:
         types[spec.TASK_TOPIC] = "std_msgs/msg/String"
+    if spec.faults.estop_at_s is not None:
+        types[spec.faults.ESTOP_TOPIC] = "std_msgs/msg/Bool"
+    joint_header_ns = spec.faults.joint_header_ns(truth.joint_stamps_ns())
     rng = np.random.default_rng(spec.seed + 1)
     writer: Any
     if storage == "ros1":
@@ -164,13 +204,16 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
             writer.set_custom_data(OPERATOR_PROMPT_KEY, spec.task)
         for log_ns, topic, k, stamp in _events(truth):
             if topic == spec.JOINT_TOPIC:
-                msg = _joint_message(msgs, truth, k, stamp)
+                msg = _joint_message(msgs, truth, k, stamp, int(joint_header_ns[k]))
             elif topic == spec.ACTION_TOPIC:
                 msg = _action_message(msgs, truth, k, stamp)
             elif topic == spec.TASK_TOPIC:
                 msg = msgs.string(data=spec.task or "")
+            elif topic == spec.faults.ESTOP_TOPIC:
+                estop_s = spec.faults.estop_at_s or 0.0
+                msg = msgs.bool(data=estop_s <= (stamp - spec.start_ns) / NS < estop_s + 0.5)
             else:
-                msg = _camera_message(msgs, cameras[topic], k, stamp, rng)
+                msg = _camera_message(msgs, spec, cameras[topic], k, stamp, rng)
             writer.write(conns[topic], log_ns, msgs.serialize(msg, types[topic]))
     finally:
         writer.close()

@@ -1,0 +1,76 @@
+"""Prefect artifacts on the conversion flow run: progress, the QA table, and a dataset summary.
+
+They show in the Prefect UI on the flow run's Artifacts tab (and under Artifacts by key).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+from uuid import UUID
+
+from prefect.artifacts import (
+    create_markdown_artifact,
+    create_progress_artifact,
+    create_table_artifact,
+    update_progress_artifact,
+)
+
+from bagport.dataset import DatasetReport
+
+__all__ = ["Progress", "publish_run_artifacts", "qa_table"]
+
+
+class Progress:
+    """A progress artifact updated as episodes finish."""
+
+    def __init__(self, total: int) -> None:
+        self._total = max(total, 1)
+        self._done = 0
+        artifact_id = create_progress_artifact(0.0, key="bagport-progress", description=self._text())
+        assert isinstance(artifact_id, UUID)  # sync context: Prefect returns the id, not a coroutine
+        self._id = artifact_id
+
+    def _text(self) -> str:
+        return f"{self._done} of {self._total} episode(s) converted"
+
+    def advance(self) -> None:
+        self._done += 1
+        update_progress_artifact(self._id, 100.0 * self._done / self._total, description=self._text())
+
+
+def qa_table(report: DatasetReport) -> list[dict[str, Any]]:
+    """One row per bag: where it went, QA score and verdict, and why."""
+    return [
+        {
+            "bag": str(row["bag_uri"]).rstrip("/").rsplit("/", 1)[-1],
+            "episode_index": "excluded" if row["episode_index"] is None else row["episode_index"],
+            "score": row["score"],
+            "verdict": row["verdict"],
+            "frames": row["frames"],
+            "reason": row["reason"],
+        }
+        for row in report.qa
+    ]
+
+
+def _markdown(report: DatasetReport) -> str:
+    lines = [
+        f"# bagport dataset `{report.root}`",
+        "",
+        f"- episodes kept: **{report.episodes}**, excluded: **{len(report.excluded)}**",
+        f"- frames: {report.frames}, duration: {report.duration_s:.1f} s, size: {report.size_bytes / 1e6:.1f} MB",
+        f"- tasks: {', '.join(report.tasks)}",
+        f"- videos: {', '.join(report.video_keys) or 'none'}",
+        f"- QA report: `{report.root.rstrip('/')}/meta/qa/report.html`",
+    ]
+    if report.excluded:
+        lines += ["", "## Excluded", ""]
+        lines += [f"- `{row['bag_uri']}`: {row['reason']}" for row in report.excluded]
+    return "\n".join(lines)
+
+
+def publish_run_artifacts(report: DatasetReport) -> None:
+    create_table_artifact(qa_table(report), key="bagport-qa", description="QA of every episode of the run")
+    create_markdown_artifact(
+        _markdown(report), key="bagport-summary", description="The dataset this run wrote"
+    )

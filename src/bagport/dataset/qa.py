@@ -1,0 +1,86 @@
+"""The dataset's QA record: ``meta/qa/`` beside (never inside) ``info.json``.
+
+```
+meta/qa/chunk-000/file-000.parquet   one row per episode and check (value, verdict, reason)
+meta/qa/summary.json                 per bag: episode index (null when excluded), score, verdict, reason
+meta/qa/report.html                  the self-contained report (see bagport.qa.report)
+```
+Excluded bags and bags that could not be converted are listed too, with the reason.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from bagport.qa import QAEntry
+from bagport.qa.report import render_report
+
+__all__ = ["QA_REPORT_PATH", "QA_SUMMARY_PATH", "QA_TABLE_PATH", "QAEntry", "qa_rows", "write_qa"]
+
+QA_TABLE_PATH = "meta/qa/chunk-000/file-000.parquet"
+QA_SUMMARY_PATH = "meta/qa/summary.json"
+QA_REPORT_PATH = "meta/qa/report.html"
+
+
+_QA_FIELDS: list[tuple[str, pa.DataType]] = [
+    ("bag_uri", pa.string()),
+    ("episode_index", pa.int64()),
+    ("excluded", pa.bool_()),
+    ("check", pa.string()),
+    ("subject", pa.string()),
+    ("value", pa.float64()),
+    ("verdict", pa.string()),
+    ("hard", pa.bool_()),
+    ("reason", pa.string()),
+]
+QA_SCHEMA = pa.schema(_QA_FIELDS)
+
+
+def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
+    rows: dict[str, list[Any]] = {
+        name: []
+        for name in (
+            "bag_uri",
+            "episode_index",
+            "excluded",
+            "check",
+            "subject",
+            "value",
+            "verdict",
+            "hard",
+            "reason",
+        )
+    }
+    for entry in entries:
+        for check in entry.qa.checks:
+            rows["bag_uri"].append(entry.qa.bag_uri)
+            rows["episode_index"].append(entry.episode_index)
+            rows["excluded"].append(entry.episode_index is None)
+            rows["check"].append(check.check)
+            rows["subject"].append(check.subject)
+            rows["value"].append(check.value)
+            rows["verdict"].append(check.verdict)
+            rows["hard"].append(check.hard)
+            rows["reason"].append(check.reason)
+    return pa.table(rows, schema=QA_SCHEMA)
+
+
+def write_qa(root: Path, entries: Sequence[QAEntry], dataset: dict[str, Any], config: dict[str, Any]) -> None:
+    """Write the QA table, summary and HTML report under ``root/meta/qa``."""
+    table_path = root / QA_TABLE_PATH
+    table_path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(qa_rows(entries), table_path, compression="zstd")
+    summary = {
+        "episodes": [e.brief() for e in entries],
+        "kept": sum(e.episode_index is not None for e in entries),
+        "excluded": sum(e.episode_index is None for e in entries),
+        "thresholds": config,
+    }
+    (root / QA_SUMMARY_PATH).write_text(json.dumps(summary, indent=1))
+    (root / QA_REPORT_PATH).write_text(render_report(entries, dataset), encoding="utf-8")

@@ -1,0 +1,118 @@
+"""Score one episode: the QA checks of :mod:`bagport.qa` fed from a conversion's own data.
+
+Stream checks use the pass-1 stamps, sync checks the per-tick selections, value checks
+the frames as they stream (a :class:`~bagport.qa.ValueMonitor` in the frame callback).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import numpy.typing as npt
+
+from bagport.bags import BagReader
+from bagport.contract import FeatureKind
+from bagport.episode.assemble import AlignedSource
+from bagport.episode.timeline import Timeline
+from bagport.qa import (
+    AlignedStamps,
+    CheckResult,
+    EpisodeQA,
+    QAConfig,
+    StreamStamps,
+    ValueMonitor,
+    judge,
+    stream_checks,
+    sync_checks,
+)
+
+__all__ = ["assess_episode", "safety_check", "task_check"]
+
+Int64Array = npt.NDArray[np.int64]
+
+
+def _streams(timeline: Timeline, sources: Sequence[AlignedSource]) -> list[StreamStamps]:
+    by_topic: dict[str, StreamStamps] = {}
+    for source in sources:
+        topic = timeline.topics[source.src.topic]
+        if topic.topic not in by_topic:
+            by_topic[topic.topic] = StreamStamps(
+                topic.topic,
+                topic.log_ns,
+                topic.header_ns,
+                source.stamp_used,
+                source.kind is FeatureKind.VIDEO,
+            )
+    return list(by_topic.values())
+
+
+def _aligned(sources: Sequence[AlignedSource]) -> list[AlignedStamps]:
+    out = []
+    for source in sources:
+        stamps = source.timeline.stamps(source.stamp_used)
+        lo = source.selection.lo
+        valid = (lo >= 0) & ~source.filled
+        out.append(
+            AlignedStamps(
+                source.src.key,
+                source.src.topic,
+                stamps[np.maximum(lo, 0)],
+                valid,
+                source.kind is FeatureKind.VIDEO,
+            )
+        )
+    return out
+
+
+def safety_check(reader: BagReader, config: QAConfig, start_ns: int, end_ns: int) -> list[CheckResult]:
+    """Messages of the safety topic with their flag set inside the window (an extra pass over one topic)."""
+    topic = config.safety.topic
+    if topic is None:
+        return []
+    if reader.info.topic(topic) is None:
+        return [CheckResult("safety.active", topic, 0.0, "warn", False, "the safety topic is not in the bag")]
+    active, first = 0, None
+    for message in reader.messages((topic,)):
+        stamp = message.header_stamp_ns() or message.log_time_ns
+        if start_ns <= stamp <= end_ns and bool(getattr(message.msg(), "data", False)):
+            active += 1
+            first = stamp if first is None else first
+    where = f", first {(first - start_ns) / 1e9:.2f} s into the episode" if first is not None else ""
+    return [
+        judge(
+            "safety.active", topic, active, config.safety.active, f"{active} safety message(s) active{where}"
+        )
+    ]
+
+
+def task_check(config: QAConfig, tasks: Sequence[str]) -> CheckResult:
+    missing = float(not any(t.strip() for t in tasks))
+    reason = "no task prompt for this episode" if missing else f"{len(set(tasks))} task prompt(s)"
+    return judge("content.task_missing", "episode", missing, config.content.task_missing, reason)
+
+
+def assess_episode(
+    bag_uri: str,
+    config: QAConfig,
+    timeline: Timeline,
+    sources: Sequence[AlignedSource],
+    ticks_ns: Int64Array,
+    monitor: ValueMonitor,
+    extra: Sequence[CheckResult],
+    fps: int,
+) -> EpisodeQA:
+    start_ns, end_ns = int(ticks_ns[0]), int(ticks_ns[-1])
+    checks, plots = stream_checks(_streams(timeline, sources), start_ns, end_ns, config)
+    synced, sync_plots = sync_checks(_aligned(sources), ticks_ns, config.time)
+    checks += synced
+    checks += monitor.checks()
+    checks += extra
+    duration_s = int(ticks_ns.size) / fps
+    return EpisodeQA.build(
+        bag_uri,
+        checks,
+        duration_s=duration_s,
+        frames=int(ticks_ns.size),
+        plots={**plots, **sync_plots, **monitor.plots(), "window_ns": [start_ns, end_ns]},
+    )

@@ -1,0 +1,135 @@
+"""QA results: one record per check, and the episode's score and verdict."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any, Literal
+
+from bagport.qa.config import Gate
+
+__all__ = ["CheckResult", "EpisodeQA", "QAEntry", "Verdict", "judge", "score_checks"]
+
+Verdict = Literal["pass", "warn", "fail"]
+_POINTS = {"pass": 1.0, "warn": 0.5, "fail": 0.0}
+
+
+@dataclass(frozen=True, slots=True)
+class CheckResult:
+    check: str
+    """``group.name``, e.g. ``rates.gap_periods``."""
+    subject: str
+    """What was measured: a topic, a feature key, or ``episode``."""
+    value: float
+    verdict: Verdict
+    hard: bool
+    reason: str
+    """One line a data supervisor can act on."""
+
+
+def judge(
+    check: str, subject: str, value: float, gate: Gate, describe: str, *, lower_is_worse: bool = False
+) -> CheckResult:
+    """Compare ``value`` with the gate; ``describe`` is the measurement in words (with units)."""
+
+    def crosses(limit: float | None) -> bool:
+        if limit is None:
+            return False
+        return value <= limit if lower_is_worse else value >= limit
+
+    if crosses(gate.fail):
+        verdict: Verdict = "fail" if gate.hard else "warn"
+        limit = gate.fail
+    elif crosses(gate.warn):
+        verdict, limit = "warn", gate.warn
+    else:
+        verdict, limit = "pass", None
+    bound = (
+        ""
+        if limit is None
+        else f" ({'at or below' if lower_is_worse else 'at or above'} {verdict} limit {limit:g})"
+    )
+    return CheckResult(check, subject, float(value), verdict, gate.hard, describe + bound)
+
+
+def score_checks(checks: list[CheckResult]) -> tuple[float, Verdict]:
+    """Score in [0, 1] (pass 1, warn 0.5, fail 0, averaged) and the verdict (worst check)."""
+    if not checks:
+        return 1.0, "pass"
+    score = sum(_POINTS[c.verdict] for c in checks) / len(checks)
+    verdicts = {c.verdict for c in checks}
+    verdict: Verdict = "fail" if "fail" in verdicts else "warn" if "warn" in verdicts else "pass"
+    return round(score, 4), verdict
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeQA:
+    """Everything QA knows about one episode; ``plots`` holds small series for the HTML report."""
+
+    bag_uri: str
+    score: float
+    verdict: Verdict
+    checks: list[CheckResult]
+    duration_s: float = 0.0
+    frames: int = 0
+    plots: dict[str, Any] = field(default_factory=dict)
+    error: str | None = None
+    """Set when the bag could not be converted at all (the error message)."""
+
+    @classmethod
+    def build(
+        cls, bag_uri: str, checks: list[CheckResult], *, duration_s: float, frames: int, plots: dict[str, Any]
+    ) -> EpisodeQA:
+        score, verdict = score_checks(checks)
+        return cls(bag_uri, score, verdict, checks, duration_s, frames, plots)
+
+    @classmethod
+    def failed(cls, bag_uri: str, error: str) -> EpisodeQA:
+        check = CheckResult("coverage.convertible", "episode", 1.0, "fail", True, error)
+        return cls(bag_uri, 0.0, "fail", [check], error=error)
+
+    @property
+    def problems(self) -> list[CheckResult]:
+        return [c for c in self.checks if c.verdict != "pass"]
+
+    @property
+    def failed_hard(self) -> list[CheckResult]:
+        return [c for c in self.checks if c.verdict == "fail"]
+
+    def headline(self) -> str:
+        """``fail: rates.gap_periods /front (...); values.non_finite ...`` or ``pass``."""
+        problems = self.failed_hard or self.problems
+        if not problems:
+            return self.verdict
+        return f"{self.verdict}: " + "; ".join(f"{c.check} {c.subject}: {c.reason}" for c in problems[:3])
+
+    def to_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> EpisodeQA:
+        checks = [CheckResult(**c) for c in data["checks"]]
+        return cls(**{**data, "checks": checks})
+
+
+@dataclass(frozen=True, slots=True)
+class QAEntry:
+    """One bag of the run: its QA, and where it ended up."""
+
+    qa: EpisodeQA
+    manifest_entry: int
+    episode_index: int | None
+    """Index in the dataset; ``None`` when the episode was excluded or failed to convert."""
+    excluded_reason: str | None = None
+
+    def brief(self) -> dict[str, Any]:
+        return {
+            "bag_uri": self.qa.bag_uri,
+            "manifest_entry": self.manifest_entry,
+            "episode_index": self.episode_index,
+            "score": self.qa.score,
+            "verdict": self.qa.verdict,
+            "excluded": self.episode_index is None,
+            "reason": self.excluded_reason or self.qa.headline(),
+            "duration_s": round(self.qa.duration_s, 3),
+            "frames": self.qa.frames,
+        }

@@ -1,0 +1,59 @@
+"""Checks of the aligned frames: how far each value is from its tick, and camera-to-action gaps."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from bagport.qa.config import TimeQA
+from bagport.qa.result import CheckResult, judge
+
+__all__ = ["AlignedStamps", "sync_checks"]
+
+Int64Array = npt.NDArray[np.int64]
+_HISTOGRAM_BINS = 20
+
+
+@dataclass(frozen=True, slots=True)
+class AlignedStamps:
+    """The source time (in the clock used for alignment) behind each frame of one feature source."""
+
+    key: str
+    topic: str
+    used_ns: Int64Array
+    valid: npt.NDArray[np.bool_]
+    """False where the frame has no message of this source (filled)."""
+    is_camera: bool
+
+
+def _histogram(error_ms: npt.NDArray[np.float64]) -> dict[str, Any]:
+    if error_ms.size == 0:
+        return {"edges_ms": [], "counts": []}
+    top = max(float(error_ms.max()), 1e-3)
+    counts, edges = np.histogram(error_ms, bins=_HISTOGRAM_BINS, range=(0.0, top))
+    return {"edges_ms": edges.round(3).tolist(), "counts": counts.tolist()}
+
+
+def sync_checks(
+    sources: list[AlignedStamps], ticks_ns: Int64Array, config: TimeQA
+) -> tuple[list[CheckResult], dict[str, Any]]:
+    """Camera-to-action gap per camera (vs the first action source), and alignment error histograms."""
+    plots = {f"{s.key}@{s.topic}": _histogram(np.abs(ticks_ns - s.used_ns)[s.valid] / 1e6) for s in sources}
+    checks: list[CheckResult] = []
+    action = next((s for s in sources if s.key == "action" or s.key.startswith("action.")), None)
+    if action is not None:
+        limit_ms = config.camera_action_gap_ms
+        for camera in (s for s in sources if s.is_camera):
+            both = camera.valid & action.valid
+            gap_ms = np.abs(camera.used_ns - action.used_ns)[both] / 1e6
+            share = float((gap_ms > limit_ms).mean()) if gap_ms.size else 0.0
+            worst = float(gap_ms.max()) if gap_ms.size else 0.0
+            checks.append(
+                judge("time.camera_action_gap_share", camera.key, share, config.camera_action_gap_share,
+                      f"{share:.1%} of frames have the {camera.key} image more than {limit_ms:g} ms from the "
+                      f"{action.key} command (worst {worst:.0f} ms)")
+            )  # fmt: skip
+    return checks, {"alignment_error_ms": plots}

@@ -1,0 +1,113 @@
+"""The QA policy in the reduce step: exclude (default), keep and flag, or fail the run."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import pyarrow.parquet as pq
+import pytest
+
+from bagport.config import ConvertConfig
+from bagport.dataset.validate import validate_dataset
+from bagport.episode import convert_episode
+from bagport.errors import QualityError
+from bagport.run import EpisodeFailure, plan_run, reduce_run
+from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+
+CAMERAS = (
+    CameraSpec("front", "raw", "bgr8", height=48, width=64),
+    CameraSpec("wrist", "jpeg", height=48, width=64),
+)
+
+
+@pytest.fixture(scope="module")
+def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Three bags: clean, NaN joints (fails QA), clean."""
+    root = tmp_path_factory.mktemp("fleet")
+    spec = EpisodeSpec(duration_s=2.5, cameras=CAMERAS)
+    for name, faults in (("a", Faults()), ("nan", Faults(joint_nan_at_s=1.0)), ("c", Faults())):
+        write_episode_bag(root / name, "mcap", replace(spec, faults=faults))
+    (root / "manifest.yaml").write_text("bags:\n  - uri: a\n  - uri: nan\n  - uri: c\n")
+    return root
+
+
+def _run(fleet: Path, out: Path, **options: object) -> tuple[ConvertConfig, list[str]]:
+    config = ConvertConfig(
+        manifest=str(fleet / "manifest.yaml"),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(out),
+        staging=str(fleet / "staging"),
+        encoder=FAST_CODEC,
+        keep_staging=True,
+        **options,  # type: ignore[arg-type]
+    )
+    plan = plan_run(config)
+    return config, [convert_episode(r).dir_uri for r in plan.requests]
+
+
+def test_failing_episode_is_excluded_and_listed_with_its_reason(fleet: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    config, staged = _run(fleet, out)
+    report = reduce_run(plan_run(config), staged)
+    assert report.episodes == 2
+    assert [row["bag_uri"].rsplit("/", 1)[-1] for row in report.excluded] == ["nan"]
+    assert "values.non_finite observation.state" in report.excluded[0]["reason"]
+    summary = json.loads((out / "meta/qa/summary.json").read_text())
+    assert [(e["episode_index"], e["verdict"]) for e in summary["episodes"]] == [
+        (0, "pass"),
+        (None, "fail"),
+        (1, "pass"),
+    ]
+    table = pq.read_table(out / "meta/qa/chunk-000/file-000.parquet").to_pylist()
+    failing = [r for r in table if r["verdict"] == "fail"]
+    assert {(r["check"], r["excluded"], r["episode_index"]) for r in failing} == {
+        ("values.non_finite", True, None)
+    }
+    run = json.loads((out / "meta/provenance/run.json").read_text())
+    assert [e["qa"]["verdict"] for e in run["episodes"]] == ["pass", "pass"]
+    assert run["excluded"][0]["manifest_entry"] == 1
+    assert "<html>" in (out / "meta/qa/report.html").read_text()
+    validated = validate_dataset(out, repo_id="test/qa", decode_every=10)
+    assert validated.episodes == 2
+
+
+def test_keep_flags_the_failing_episode_in_the_dataset(fleet: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    config, staged = _run(fleet, out, on_qa_fail="keep")
+    report = reduce_run(plan_run(config), staged)
+    assert (report.episodes, report.excluded) == (3, ())
+    summary = json.loads((out / "meta/qa/summary.json").read_text())
+    assert [(e["episode_index"], e["verdict"]) for e in summary["episodes"]] == [
+        (0, "pass"),
+        (1, "fail"),
+        (2, "pass"),
+    ]
+
+
+def test_fail_run_writes_nothing_and_lists_failures(fleet: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    config, staged = _run(fleet, out, on_qa_fail="fail_run")
+    failure = EpisodeFailure(str(fleet / "gone"), 3, "gone: bag does not exist")
+    with pytest.raises(QualityError, match=r"(?s)2 of 4 bag\(s\) failed.*nothing was written") as info:
+        reduce_run(plan_run(config), staged, [failure])
+    assert "bags[1]" in str(info.value)
+    assert "values.non_finite" in str(info.value)
+    assert "bags[3]" in str(info.value)
+    assert not out.exists()
+
+
+def test_a_bag_that_failed_to_convert_is_excluded_with_its_error(fleet: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    config, staged = _run(fleet, out)
+    failure = EpisodeFailure(str(fleet / "gone"), 3, "gone: bag does not exist")
+    report = reduce_run(plan_run(config), staged, [failure])
+    assert [r["reason"] for r in report.excluded][-1] == "conversion failed: gone: bag does not exist"
+
+
+def test_nothing_left_is_an_error_that_says_how_to_fix_it(fleet: Path, tmp_path: Path) -> None:
+    config, staged = _run(fleet, tmp_path / "ds")
+    with pytest.raises(QualityError, match=r"(?s)no episode is left to write.*--on-qa-fail keep"):
+        reduce_run(plan_run(config), staged[1:2])

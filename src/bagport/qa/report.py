@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from html import escape
 from typing import Any
 
-from bagport.qa.result import QAEntry
+from bagport.qa.result import CheckResult, QAEntry
 
 __all__ = ["render_report"]
 
@@ -120,14 +120,24 @@ def _episode_plots(plots: dict[str, Any], duration_s: float) -> str:
     return f'<div class="plots">{"".join(parts)}</div>{gap_list}'
 
 
-def _checks_table(entry: QAEntry) -> str:
-    order = {"fail": 0, "warn": 1, "pass": 2}
+def _table(checks: Sequence[CheckResult]) -> str:
     rows = "".join(
         f'<tr><td class="{c.verdict}">{c.verdict}</td><td>{escape(c.check)}</td><td>{escape(c.subject)}</td>'
         f"<td>{c.value:.4g}</td><td>{escape(c.reason)}</td></tr>"
-        for c in sorted(entry.qa.checks, key=lambda c: order[c.verdict])
+        for c in checks
     )
     return f"<table><tr><th>verdict</th><th>check</th><th>subject</th><th>value</th><th>reason</th></tr>{rows}</table>"
+
+
+def _checks_table(entry: QAEntry) -> str:
+    """Failed and warned checks up front; the passed ones folded away."""
+    order = {"fail": 0, "warn": 1, "pass": 2}
+    problems = sorted(entry.qa.problems, key=lambda c: order[c.verdict])
+    passed = [c for c in entry.qa.checks if c.verdict == "pass"]
+    html = _table(problems) if problems else ""
+    if passed:
+        html += f"<details><summary class='small'>{len(passed)} passed check(s)</summary>{_table(passed)}</details>"
+    return html
 
 
 def render_report(entries: Sequence[QAEntry], dataset: dict[str, Any]) -> str:

@@ -61,7 +61,7 @@ def report_html(tmp_path_factory: pytest.TempPathFactory) -> Path:
 def test_report_is_self_contained_and_lists_every_episode(report_html: Path) -> None:
     html = report_html.read_text()
     assert not re.search(r"<script|<link|src=\"http|href=\"http", html)
-    assert html.count("<details") == 3
+    assert html.count("<details id=") == 3
     assert "values.non_finite" in html
     assert "rates.gap_periods" in html
     assert "broken.mcap: not a bag" in html

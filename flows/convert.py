@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from prefect import flow, get_run_logger
+from prefect import flow, get_run_logger, tags
 from prefect.client.schemas.objects import State
 from prefect.events.worker import EventsWorker
 from prefect.futures import as_completed
@@ -40,10 +40,12 @@ def _label(uri: str) -> str:
 def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
     plan = plan_task(config)
-    futures = [
-        convert_episode_task.submit(request.to_dict(), label=_label(request.bag_uri))
-        for request in plan.requests
-    ]
+    futures = []
+    for request in plan.requests:
+        label = _label(request.bag_uri)
+        # Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
+        with tags(f"robot:{plan.contract.robot_type}", f"bag:{label}"):
+            futures.append(convert_episode_task.submit(request.to_dict(), label=label))
     progress = Progress(len(futures))
     for _ in as_completed(futures):
         progress.advance()

@@ -1,0 +1,131 @@
+"""A real `prefect server start` (SQLite) watches a conversion: flow run, one task run per episode, artifacts."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from prefect.client.orchestration import get_client
+from prefect.client.schemas.filters import (
+    ArtifactFilter,
+    ArtifactFilterFlowRunId,
+    FlowRunFilter,
+    FlowRunFilterId,
+)
+from prefect.settings import PREFECT_API_URL, temporary_settings
+
+from bagport.synth import write_sample_fleet
+from tests.helpers import REPO, SAMPLE_CONTRACT
+
+pytestmark = pytest.mark.slow
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+@pytest.fixture
+def prefect_server(tmp_path: Path) -> Iterator[tuple[str, dict[str, str]]]:
+    port = _free_port()
+    env = {
+        **os.environ,
+        "PREFECT_HOME": str(tmp_path / "prefect-home"),
+        "PREFECT_SERVER_DATABASE_CONNECTION_URL": f"sqlite+aiosqlite:///{tmp_path / 'prefect.db'}",
+        "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
+        "PREFECT_UI_ENABLED": "false",
+    }
+    env.pop("PREFECT_API_URL", None)
+    prefect = str(Path(sys.executable).with_name("prefect"))
+    server = subprocess.Popen(
+        [prefect, "server", "start", "--host", "127.0.0.1", "--port", str(port)],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    api_url = f"http://127.0.0.1:{port}/api"
+    try:
+        deadline = time.monotonic() + 180
+        while True:
+            try:
+                with urllib.request.urlopen(f"{api_url}/health", timeout=2) as response:
+                    if response.status == 200:
+                        break
+            except OSError:
+                pass
+            assert server.poll() is None, "prefect server exited during start-up"
+            assert time.monotonic() < deadline, "prefect server did not answer /api/health within 180 s"
+            time.sleep(0.5)
+        yield api_url, {**env, "PREFECT_API_URL": api_url}
+    finally:
+        os.killpg(server.pid, signal.SIGTERM)  # the server and its workers, by PID
+        try:
+            server.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(server.pid, signal.SIGKILL)
+            server.wait()
+
+
+async def _inspect(api_url: str) -> tuple[list[str], list[str], dict[str, object]]:
+    async with get_client() as client:
+        assert str(client.api_url).rstrip("/") == api_url
+        flow_runs = await client.read_flow_runs()
+        assert len(flow_runs) == 1
+        run = flow_runs[0]
+        task_runs = await client.read_task_runs(
+            flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=[run.id]))
+        )
+        artifacts = await client.read_artifacts(
+            artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[run.id]))
+        )
+        return (
+            [str(run.state_name)],
+            sorted(f"{t.name} {' '.join(sorted(t.tags))}" for t in task_runs),
+            {str(a.key): a.data for a in artifacts if a.key},
+        )
+
+
+def test_conversion_is_visible_through_the_prefect_api(
+    tmp_path: Path, prefect_server: tuple[str, dict[str, str]]
+) -> None:
+    api_url, env = prefect_server
+    write_sample_fleet(tmp_path / "bags", episodes=2, duration_s=1.0)
+    out = tmp_path / "dataset"
+    proc = subprocess.run(
+        [sys.executable, "-m", "flows.cli", "convert", "--manifest", str(tmp_path / "bags" / "manifest.yaml"),
+         "--contract", str(SAMPLE_CONTRACT), "--output", str(out), "--runner", "thread", "--codec", "h264-fast"],
+        env=env, cwd=REPO, capture_output=True, text=True, check=False, timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    os.environ["PREFECT_API_URL"] = api_url
+    try:
+        with temporary_settings({PREFECT_API_URL: api_url}):
+            states, task_names, artifacts = asyncio.run(_inspect(api_url))
+    finally:
+        os.environ.pop("PREFECT_API_URL", None)
+    assert states == ["Completed"]
+    converts = [n for n in task_names if n.startswith("convert ")]
+    # one task run per episode, named and tagged by bag and robot
+    assert converts == [
+        "convert episode_000 bag:episode_000 bagport episode robot:bagport_sample_arm",
+        "convert episode_001 bag:episode_001 bagport episode robot:bagport_sample_arm",
+    ]
+    assert any(n.startswith("write-dataset") for n in task_names)
+    assert set(artifacts) >= {"bagport-qa", "bagport-summary", "bagport-progress"}
+    qa_table = str(artifacts["bagport-qa"])
+    assert "episode_000" in qa_table
+    assert "episode_001" in qa_table
+    assert "verdict" in qa_table
+    assert "episodes kept: **2**" in str(artifacts["bagport-summary"])
+    assert float(str(artifacts["bagport-progress"])) == pytest.approx(100.0)

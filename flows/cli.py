@@ -52,6 +52,8 @@ def _cmd_convert(args: argparse.Namespace) -> int:
 
     config = ConvertConfig(
         manifest=args.manifest,
+        bags_glob=args.glob,
+        append=args.append,
         contract=args.contract,
         output=args.output,
         repo_id=args.repo_id,
@@ -169,7 +171,11 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True)
 
     convert = sub.add_parser("convert", help="convert the bags of a manifest with a contract (Prefect flow)")
-    convert.add_argument("--manifest", required=True, help="manifest YAML (bags: [{uri, task, metadata}])")
+    bags = convert.add_mutually_exclusive_group(required=True)
+    bags.add_argument("--manifest", help="manifest YAML (bags: [{uri, task, metadata}])")
+    bags.add_argument(
+        "--glob", help="every bag matching this glob instead of a manifest, e.g. 's3://fleet/2026-*/*.mcap'"
+    )
     convert.add_argument("--contract", required=True, help="contract YAML (Rosetta-compatible)")
     convert.add_argument("--output", required=True, help="dataset folder to create (LeRobot's root)")
     convert.add_argument("--repo-id", default=None, help="LeRobot repo id recorded for the dataset")
@@ -186,6 +192,11 @@ def _parser() -> argparse.ArgumentParser:
     )
     convert.add_argument("--codec", default=None, help="encoder preset name in configs/codecs or a YAML file")
     convert.add_argument("--overwrite", action="store_true", help="replace an existing dataset at --output")
+    convert.add_argument(
+        "--append",
+        action="store_true",
+        help="add the bags not yet in the dataset at --output as new episodes (created if missing)",
+    )
     convert.add_argument("--keep-staging", action="store_true", help="keep staged episodes after success")
     convert.add_argument("--chunks-size", type=int, default=1000)
     convert.add_argument("--data-files-size-in-mb", type=float, default=100)

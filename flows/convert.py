@@ -18,6 +18,7 @@ from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTa
 
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
+from bagport.dataset.history import dataset_report
 from bagport.errors import BagportError
 from bagport.run import EpisodeFailure, plan_run
 from flows.artifacts import Progress, publish_run_artifacts
@@ -40,6 +41,11 @@ def _label(uri: str) -> str:
 def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
     plan = plan_task(config)
+    if not plan.requests:  # an append or ingestion run with nothing new
+        logger.info(
+            "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
+        )
+        return dataset_report(config.output)
     futures = []
     for request in plan.requests:
         label = _label(request.bag_uri)

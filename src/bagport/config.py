@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
+import json
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt, model_validator
 
 __all__ = ["ConvertConfig"]
 
@@ -14,7 +15,10 @@ class ConvertConfig(BaseModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    manifest: str = Field(description="Manifest YAML: local path or fsspec URI.")
+    manifest: str | None = Field(default=None, description="Manifest YAML: local path or fsspec URI.")
+    bags_glob: str | None = Field(
+        default=None, description="Instead of a manifest: every bag matching this glob (local or fsspec URI)."
+    )
     contract: str = Field(description="Contract YAML: local path or fsspec URI.")
     output: str = Field(description="Dataset root folder to create (LeRobot's `root`).")
     repo_id: str | None = Field(
@@ -41,12 +45,28 @@ class ConvertConfig(BaseModel):
     video_files_size_in_mb: PositiveFloat = 200
     overwrite: bool = False
     keep_staging: bool = False
+    append: bool = Field(
+        default=False,
+        description="Add new episodes to the dataset at output (created if missing); bags already in it are skipped.",
+    )
     qa: str | None = Field(
         default=None, description="QA thresholds YAML (see configs/qa.yaml); default: built-in."
     )
     on_qa_fail: Literal["exclude", "keep", "fail_run"] | None = Field(
         default=None, description="Override the QA file's on_fail: exclude, keep (and flag) or fail_run."
     )
+
+    @model_validator(mode="after")
+    def _one_bag_source(self) -> ConvertConfig:
+        if (self.manifest is None) == (self.bags_glob is None):
+            raise ValueError("give exactly one of manifest and bags_glob")
+        return self
+
+    def manifest_text(self) -> tuple[str, str] | None:
+        """``(yaml, source name)`` of the one-entry manifest a ``bags_glob`` stands for."""
+        if self.bags_glob is None:
+            return None
+        return f"bags:\n  - uri: {json.dumps(self.bags_glob)}\n", f"--glob {self.bags_glob}"
 
     def resolved_repo_id(self) -> str:
         name = self.output.rstrip("/").rsplit("/", 1)[-1] or "dataset"

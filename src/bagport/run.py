@@ -10,21 +10,25 @@ import json
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import fsspec
 from fsspec.core import url_to_fs
 
 from bagport import __version__
+from bagport.bags import source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
+from bagport.dataset.history import converted_bags
+from bagport.dataset.write import recover_interrupted_append
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
-from bagport.manifest import Manifest, load_manifest
+from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
 from bagport.staging import QA_FILE, EpisodeSummary, read_summary
-from bagport.uris import read_text
+from bagport.uris import is_local, read_text
 from bagport.video import EncoderSettings
 
 __all__ = ["EpisodeFailure", "RunPlan", "plan_run", "reduce_run"]
@@ -61,9 +65,19 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     qa = load_qa_config(read_text(config.qa, "qa") if config.qa else None, config.qa or "qa.yaml")
     if config.on_qa_fail is not None:
         qa = qa.model_copy(update={"on_fail": config.on_qa_fail})
-    manifest = load_manifest(config.manifest)
+    glob_manifest = config.manifest_text()
+    if glob_manifest is not None:
+        manifest = parse_manifest(*glob_manifest)
+    else:
+        assert config.manifest is not None  # the config validates that one of the two is given
+        manifest = load_manifest(config.manifest)
     fs, out_path = url_to_fs(config.output)
-    if fs.exists(out_path) and not config.overwrite:
+    done: set[tuple[str, str]] = set()
+    if config.append and fs.exists(out_path):
+        if is_local(fs):
+            recover_interrupted_append(Path(out_path))
+        done = converted_bags(config.output)
+    elif fs.exists(out_path) and not config.overwrite:
         raise DatasetWriteError(
             f"{config.output} already exists; nothing was written. Fix: choose a new --output, or pass "
             "--overwrite to replace it (the old dataset stays until the new one is complete)."
@@ -83,6 +97,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             qa=qa.model_dump(mode="json"),
         )
         for bag in manifest.bags
+        if not done or (bag.uri, source_stamp(bag.uri)) not in done
     )
     return RunPlan(config, contract, manifest, requests, contract_text, qa)
 
@@ -92,7 +107,11 @@ def run_record(plan: RunPlan) -> dict[str, Any]:
         "bagport_version": __version__,
         "repo_id": plan.config.resolved_repo_id(),
         "contract": {"uri": plan.config.contract, "text": plan.contract_text},
-        "manifest": {"uri": plan.config.manifest, "bags": [b.uri for b in plan.manifest.bags]},
+        "manifest": {
+            "uri": plan.config.manifest or plan.config.bags_glob,
+            "bags": [b.uri for b in plan.manifest.bags],
+            "converted_now": [r.bag_uri for r in plan.requests],
+        },
         "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
         "host_cpus": os.cpu_count(),
     }
@@ -171,7 +190,10 @@ def reduce_run(
         video_files_size_in_mb=plan.config.video_files_size_in_mb,
     )
     record = run_record(plan)
-    record["excluded"] = [e.brief() for e in entries if e.episode_index is None]
+    # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
+    record["excluded"] = [
+        {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
+    ]
     report = write_dataset(
         kept,
         plan.config.output,
@@ -181,6 +203,7 @@ def reduce_run(
         overwrite=plan.config.overwrite,
         qa=entries,
         qa_config=plan.qa.model_dump(mode="json"),
+        append=plan.config.append,
     )
     if not plan.config.keep_staging:
         fs, path = url_to_fs(plan.config.resolved_staging())

@@ -70,18 +70,23 @@ def write_data_files(
     *,
     file_size_in_mb: float,
     chunks_size: int,
+    start: tuple[int, int] = (0, 0),
+    first_episode_index: int = 0,
+    first_index: int = 0,
 ) -> list[DataPlacement]:
-    """Stream staged frame tables into rotated data files; returns one placement per episode."""
+    """Stream staged frame tables into rotated data files; returns one placement per episode.
+
+    ``start`` (chunk, file) and the first episode/global indices let an append continue a dataset.
+    """
     placements: list[DataPlacement] = []
-    chunk, file = 0, 0
+    chunk, file = start
     writer: pq.ParquetWriter | None = None
     schema: pa.Schema | None = None
     written_bytes = 0
-    first_index = 0
     limit = file_size_in_mb * _MB
     metadata = {b"huggingface": hf_features_metadata(vectors)}
     try:
-        for episode_index, summary in enumerate(summaries):
+        for episode_index, summary in enumerate(summaries, start=first_episode_index):
             table = _episode_table(summary, episode_index, first_index, task_index, vectors)
             size = table.nbytes
             if writer is not None and written_bytes + size > limit:

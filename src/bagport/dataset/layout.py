@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 __all__ = [
+    "APPEND_RUN_RECORD_PATH",
     "CODEBASE_VERSION",
     "DATA_PATH",
     "DEFAULT_FEATURES",
     "EPISODES_PATH",
+    "HISTOGRAMS_PATH",
     "INFO_PATH",
     "PROVENANCE_PATH",
     "RUN_RECORD_PATH",
@@ -27,6 +29,9 @@ VIDEO_PATH = "videos/{video_key}/" + CHUNK_FILE + ".mp4"
 # bagport's own metadata lives beside, never inside, info.json (LeRobot rewrites info.json).
 PROVENANCE_PATH = "meta/provenance/" + CHUNK_FILE + ".parquet"
 RUN_RECORD_PATH = "meta/provenance/run.json"
+APPEND_RUN_RECORD_PATH = "meta/provenance/run-{run:03d}.json"
+HISTOGRAMS_PATH = "meta/provenance/image_histograms.json"
+"""Dataset-wide pixel histograms per camera, so an append merges image stats exactly."""
 
 DEFAULT_FEATURES: dict[str, dict[str, object]] = {
     "timestamp": {"dtype": "float32", "shape": [1], "names": None},

@@ -15,12 +15,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
+from bagport.dataset.base import DatasetBase
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import (
     CODEBASE_VERSION,
     DATA_PATH,
     DEFAULT_FEATURES,
     EPISODES_PATH,
+    HISTOGRAMS_PATH,
     INFO_PATH,
     STATS_PATH,
     TASKS_PATH,
@@ -131,7 +133,12 @@ def write_meta(
     videos: dict[str, list[VideoPlacement]],
     episode_stats: Sequence[EpisodeStats],
     info: dict[str, Any],
+    base: DatasetBase | None = None,
 ) -> None:
+    """Write ``meta/``; with ``base`` (an append) the new episodes continue the existing ones in a new
+    episodes file, and stats merge with the existing dataset's."""
+    first_episode = base.episodes if base is not None else 0
+    episodes_file = base.next_episodes if base is not None else (0, 0)
     (root / "meta").mkdir(parents=True, exist_ok=True)
     (root / INFO_PATH).write_text(json.dumps(info, indent=4))
     task_frame = pd.DataFrame(
@@ -141,9 +148,8 @@ def write_meta(
 
     stat_keys = [f.key for f in features] + list(DEFAULT_FEATURES)
     rows = []
-    for episode_index, (summary, placement, ep_stats) in enumerate(
-        zip(summaries, data, episode_stats, strict=True)
-    ):
+    for n, (summary, placement, ep_stats) in enumerate(zip(summaries, data, episode_stats, strict=True)):
+        episode_index = first_episode + n
         row: dict[str, Any] = {
             "episode_index": episode_index,
             "tasks": list(summary.tasks),
@@ -154,26 +160,34 @@ def write_meta(
             "dataset_to_index": placement.to_index,
         }
         for key, placed in videos.items():
-            video = placed[episode_index]
+            video = placed[n]
             row[f"videos/{key}/chunk_index"] = video.chunk_index
             row[f"videos/{key}/file_index"] = video.file_index
             row[f"videos/{key}/from_timestamp"] = video.from_timestamp_s
             row[f"videos/{key}/to_timestamp"] = video.to_timestamp_s
         row.update(_stat_columns(ep_stats.stats, stat_keys))
-        row["meta/episodes/chunk_index"] = 0
-        row["meta/episodes/file_index"] = 0
+        row["meta/episodes/chunk_index"] = episodes_file[0]
+        row["meta/episodes/file_index"] = episodes_file[1]
         rows.append(row)
-    episodes_path = root / EPISODES_PATH.format(chunk_index=0, file_index=0)
+    episodes_path = root / EPISODES_PATH.format(chunk_index=episodes_file[0], file_index=episodes_file[1])
     episodes_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(pa.Table.from_pylist(rows), episodes_path)
 
     merged: dict[str, Any] = {}
+    histograms: dict[str, list[int]] = {}
     for key in stat_keys:
         parts = [ep.stats[key] for ep in episode_stats]
-        if all(key in ep.histograms for ep in episode_stats):
+        if base is not None:
+            parts.append(base.stats[key])
+        if all(key in ep.histograms for ep in episode_stats) and (base is None or key in base.histograms):
             hists = [ep.histograms[key] for ep in episode_stats]
+            if base is not None:
+                hists.append(base.histograms[key])
             value = merge_histograms(hists, [int(p["count"][0]) for p in parts])
+            histograms[key] = np.sum(np.stack(hists), axis=0).tolist()
         else:
             value = merge_feature_stats(parts)
         merged[key] = {stat: np.asarray(v).tolist() for stat, v in value.items()}
     (root / STATS_PATH).write_text(json.dumps(merged, indent=4))
+    (root / HISTOGRAMS_PATH).parent.mkdir(parents=True, exist_ok=True)
+    (root / HISTOGRAMS_PATH).write_text(json.dumps(histograms))

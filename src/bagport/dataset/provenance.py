@@ -19,21 +19,31 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
+from bagport.dataset.base import DatasetBase
 from bagport.dataset.data_files import DataPlacement
-from bagport.dataset.layout import PROVENANCE_PATH, RUN_RECORD_PATH
+from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, PROVENANCE_PATH, RUN_RECORD_PATH
 from bagport.staging import PROVENANCE_FILE, EpisodeSummary
 
 __all__ = ["write_provenance"]
 
 
 def write_provenance(
-    root: Path, summaries: Sequence[EpisodeSummary], data: Sequence[DataPlacement], run_record: dict[str, Any]
+    root: Path,
+    summaries: Sequence[EpisodeSummary],
+    data: Sequence[DataPlacement],
+    run_record: dict[str, Any],
+    base: DatasetBase | None = None,
 ) -> None:
-    path = root / PROVENANCE_PATH.format(chunk_index=0, file_index=0)
+    """Write this run's provenance rows and run record; an append adds a new file and ``run-NNN.json``."""
+    first_episode = base.episodes if base is not None else 0
+    chunk, file = base.next_provenance if base is not None else (0, 0)
+    path = root / PROVENANCE_PATH.format(chunk_index=chunk, file_index=file)
     path.parent.mkdir(parents=True, exist_ok=True)
     writer: pq.ParquetWriter | None = None
     try:
-        for episode_index, (summary, placement) in enumerate(zip(summaries, data, strict=True)):
+        for episode_index, (summary, placement) in enumerate(
+            zip(summaries, data, strict=True), first_episode
+        ):
             fs, staged = url_to_fs(summary.file(PROVENANCE_FILE))
             with fs.open(staged, "rb") as handle:
                 table = pq.read_table(handle)
@@ -57,6 +67,7 @@ def write_provenance(
             "storage": s.storage,
             "bag_size_bytes": s.bag_size_bytes,
             "bag_fingerprint": s.bag_fingerprint,
+            "source_stamp": s.source_stamp,
             "manifest_entry": s.manifest_entry,
             "staged_episode_id": s.episode_id,
             "frames": s.frames,
@@ -68,7 +79,8 @@ def write_provenance(
             "qa": s.qa,
             "metadata": s.metadata,
         }
-        for i, s in enumerate(summaries)
+        for i, s in enumerate(summaries, first_episode)
     ]
     record = {**run_record, "episodes": episodes}
-    (root / RUN_RECORD_PATH).write_text(json.dumps(record, indent=2, default=str))
+    record_path = RUN_RECORD_PATH if base is None else APPEND_RUN_RECORD_PATH.format(run=base.run_number)
+    (root / record_path).write_text(json.dumps(record, indent=2, default=str))

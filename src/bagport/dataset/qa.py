@@ -71,16 +71,32 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
     return pa.table(rows, schema=QA_SCHEMA)
 
 
-def write_qa(root: Path, entries: Sequence[QAEntry], dataset: dict[str, Any], config: dict[str, Any]) -> None:
-    """Write the QA table, summary and HTML report under ``root/meta/qa``."""
-    table_path = root / QA_TABLE_PATH
+def write_qa(
+    root: Path,
+    entries: Sequence[QAEntry],
+    dataset: dict[str, Any],
+    config: dict[str, Any],
+    run_number: int = 0,
+) -> None:
+    """Write the QA table, summary and HTML report under ``root/meta/qa``.
+
+    An append (``run_number`` > 0) adds its own table file and report, and extends the summary.
+    """
+    table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
     table_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(qa_rows(entries), table_path, compression="zstd")
+    report_path = (
+        QA_REPORT_PATH if run_number == 0 else QA_REPORT_PATH.replace(".html", f"-{run_number:03d}.html")
+    )
+    summary_path = root / QA_SUMMARY_PATH
+    previous = json.loads(summary_path.read_text()) if run_number and summary_path.is_file() else {}
+    episodes = [*previous.get("episodes", []), *(e.brief() for e in entries)]
     summary = {
-        "episodes": [e.brief() for e in entries],
-        "kept": sum(e.episode_index is not None for e in entries),
-        "excluded": sum(e.episode_index is None for e in entries),
+        "episodes": episodes,
+        "kept": sum(e["episode_index"] is not None for e in episodes),
+        "excluded": sum(e["episode_index"] is None for e in episodes),
         "thresholds": config,
+        "reports": [*previous.get("reports", []), report_path.removeprefix("meta/qa/")],
     }
-    (root / QA_SUMMARY_PATH).write_text(json.dumps(summary, indent=1))
-    (root / QA_REPORT_PATH).write_text(render_report(entries, dataset), encoding="utf-8")
+    summary_path.write_text(json.dumps(summary, indent=1))
+    (root / report_path).write_text(render_report(entries, dataset), encoding="utf-8")

@@ -45,10 +45,14 @@ def write_video_files(
     fps: int,
     file_size_in_mb: float,
     chunks_size: int,
+    start: tuple[int, int] = (0, 0),
 ) -> list[VideoPlacement]:
-    """Group clips into files of at most ``file_size_in_mb`` (at least one clip each) and remux."""
+    """Group clips into files of at most ``file_size_in_mb`` (at least one clip each) and remux.
+
+    ``start`` (chunk, file): where the first new file goes (after the last one, for an append).
+    """
     placements: list[VideoPlacement] = []
-    chunk, file = 0, 0
+    chunk, file = start
     limit = file_size_in_mb * _MB
     with tempfile.TemporaryDirectory(prefix="bagport-clips-") as tmp:
         scratch = Path(tmp)

@@ -6,7 +6,7 @@ import shutil
 import tempfile
 import uuid
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -15,6 +15,7 @@ import numpy.typing as npt
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
+from bagport.dataset.base import DatasetBase, read_base
 from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
@@ -25,7 +26,7 @@ from bagport.qa import QAEntry
 from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
 from bagport.uris import is_local
 
-__all__ = ["DatasetReport", "write_dataset"]
+__all__ = ["DatasetReport", "recover_interrupted_append", "write_dataset"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -89,10 +90,15 @@ def _build(
     run_record: dict[str, Any],
     qa: Sequence[QAEntry],
     qa_config: dict[str, Any],
+    base: DatasetBase | None = None,
 ) -> DatasetReport:
+    """Write the dataset's files under ``root``; with ``base``, only this run's new files plus ``meta/``."""
     features = _check_consistent(summaries)
     fps = summaries[0].fps
-    tasks = list(dict.fromkeys(t for s in summaries for t in s.tasks))
+    first_episode = base.episodes if base is not None else 0
+    first_index = base.frames if base is not None else 0
+    known = base.tasks if base is not None else []
+    tasks = list(dict.fromkeys([*known, *(t for s in summaries for t in s.tasks)]))
     task_index = {t: i for i, t in enumerate(tasks)}
     vectors = [f for f in features if f.video_info is None]
     video_keys = [f.key for f in features if f.video_info is not None]
@@ -103,6 +109,9 @@ def _build(
         task_index,
         file_size_in_mb=limits.data_files_size_in_mb,
         chunks_size=limits.chunks_size,
+        start=base.next_data if base is not None else (0, 0),
+        first_episode_index=first_episode,
+        first_index=first_index,
     )
     videos = {
         key: write_video_files(
@@ -112,46 +121,68 @@ def _build(
             fps=fps,
             file_size_in_mb=limits.video_files_size_in_mb,
             chunks_size=limits.chunks_size,
+            start=base.next_video.get(key, (0, 0)) if base is not None else (0, 0),
         )
         for key in video_keys
     }
     episode_stats = [
-        load_episode_stats(s, i, data[i], _task_indices(s, task_index)) for i, s in enumerate(summaries)
+        load_episode_stats(s, first_episode + i, data[i], _task_indices(s, task_index))
+        for i, s in enumerate(summaries)
     ]
-    total_frames = sum(s.frames for s in summaries)
+    new_frames = sum(s.frames for s in summaries)
     info = build_info(
         features,
         robot_type=robot_type,
         fps=fps,
-        total_episodes=len(summaries),
-        total_frames=total_frames,
+        total_episodes=first_episode + len(summaries),
+        total_frames=first_index + new_frames,
         total_tasks=len(tasks),
         limits=limits,
     )
-    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info)
-    write_provenance(root, summaries, data, run_record)
+    if base is not None:
+        _check_same_features(base, info)
+    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base)
+    write_provenance(root, summaries, data, run_record, base)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
+    total_frames = first_index + new_frames
     facts = {
-        "episodes": len(summaries),
+        "episodes": first_episode + len(summaries),
+        "added by this run": len(summaries),
         "excluded": sum(e.episode_index is None for e in qa),
         "frames": total_frames,
         "duration_s": round(total_frames / fps, 2),
         "fps": fps,
         "tasks": "; ".join(tasks),
-        "size_mb": round(size / 1e6, 2),
     }
-    if qa:
-        write_qa(root, qa, facts, qa_config)
+    entries = [
+        e if e.episode_index is None else replace(e, episode_index=e.episode_index + first_episode)
+        for e in qa
+    ]
+    if entries:
+        write_qa(root, entries, facts, qa_config, base.run_number if base is not None else 0)
     return DatasetReport(
         str(root),
-        len(summaries),
+        first_episode + len(summaries),
         total_frames,
         tuple(tasks),
         tuple(video_keys),
         size,
         total_frames / fps,
-        tuple(e.brief() for e in qa if e.episode_index is None),
-        tuple(e.brief() for e in qa),
+        tuple(e.brief() for e in entries if e.episode_index is None),
+        tuple(e.brief() for e in entries),
+    )
+
+
+def _check_same_features(base: DatasetBase, info: dict[str, Any]) -> None:
+    old, new = base.info["features"], info["features"]
+    if old == new and base.info["fps"] == info["fps"]:
+        return
+    changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+    raise DatasetWriteError(
+        f"cannot append: the new episodes' features differ from the dataset's ({', '.join(changed) or 'fps'}: "
+        f"dataset has {[old.get(k) for k in changed[:2]]}, new episodes give {[new.get(k) for k in changed[:2]]}); "
+        "nothing was written. Fix: append with the contract and codec the dataset was made with, or convert "
+        "into a new --output."
     )
 
 
@@ -165,16 +196,25 @@ def write_dataset(
     overwrite: bool = False,
     qa: Sequence[QAEntry] = (),
     qa_config: dict[str, Any] | None = None,
+    append: bool = False,
 ) -> DatasetReport:
     """Write the dataset at ``output`` (the dataset root).
 
     Everything is built in a temporary folder beside ``output`` and renamed into
     place at the end, so a reader never sees a half-written dataset and a failure
-    leaves whatever was at ``output`` untouched.
+    leaves whatever was at ``output`` untouched. With ``append``, the episodes are
+    added to the dataset at ``output`` (created if missing) as new files.
     """
     limits = limits or DatasetLimits()
     fs, out_path = url_to_fs(output)
     local = is_local(fs)
+    if append and fs.exists(out_path):
+        if not local:
+            raise DatasetWriteError(
+                f"--append to {output} is not supported: appending publishes atomically by renames, which only "
+                "a local output allows. Fix: append to a local dataset and sync it, or convert into a new --output."
+            )
+        return _append(Path(out_path), summaries, robot_type, run_record or {}, qa, qa_config or {})
     if fs.exists(out_path) and not overwrite:
         raise DatasetWriteError(
             f"{output} already exists; nothing was written. Fix: choose a new --output, or pass --overwrite "
@@ -212,6 +252,70 @@ def write_dataset(
         report.excluded,
         report.qa,
     )
+
+
+def _append(
+    final: Path,
+    summaries: Sequence[EpisodeSummary],
+    robot_type: str,
+    run_record: dict[str, Any],
+    qa: Sequence[QAEntry],
+    qa_config: dict[str, Any],
+) -> DatasetReport:
+    """Add episodes to the dataset at ``final`` without touching its data and video files.
+
+    New data/video files and a new ``meta/`` are built beside it; the new files are moved in
+    (nothing refers to them yet), then ``meta/`` is swapped by two renames. A failure before the
+    swap removes what was moved; the previous dataset stays valid throughout.
+    """
+    recover_interrupted_append(final)
+    base = read_base(final)
+    info = base.info
+    limits = DatasetLimits(
+        chunks_size=int(info["chunks_size"]),
+        data_files_size_in_mb=float(info["data_files_size_in_mb"]),
+        video_files_size_in_mb=float(info["video_files_size_in_mb"]),
+    )
+    build_root = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex[:8]}"
+    build_root.mkdir(parents=True)
+    moved: list[Path] = []
+    try:
+        shutil.copytree(final / "meta", build_root / "meta")
+        report = _build(build_root, summaries, robot_type, limits, run_record, qa, qa_config, base)
+        for folder in ("data", "videos"):
+            for item in sorted((build_root / folder).rglob("*")) if (build_root / folder).exists() else []:
+                if item.is_file():
+                    target = final / item.relative_to(build_root)
+                    if target.exists():
+                        raise DatasetWriteError(
+                            f"{target} exists already; the dataset changed during the append"
+                        )
+                    target.parent.mkdir(parents=True, exist_ok=True)
+                    item.rename(target)
+                    moved.append(target)
+        retired = final / f".meta.old-{uuid.uuid4().hex[:8]}"
+        (final / "meta").rename(retired)
+        (build_root / "meta").rename(final / "meta")
+        shutil.rmtree(retired, ignore_errors=True)
+    except BaseException:
+        for target in moved:
+            target.unlink(missing_ok=True)
+        raise
+    finally:
+        shutil.rmtree(build_root, ignore_errors=True)
+    size = sum(p.stat().st_size for p in final.rglob("*") if p.is_file())
+    return replace(report, root=str(final), size_bytes=size)
+
+
+def recover_interrupted_append(final: Path) -> None:
+    """Finish an append that crashed between the two renames of ``meta/``."""
+    if (final / "meta").exists():
+        for stale in final.glob(".meta.old-*"):
+            shutil.rmtree(stale, ignore_errors=True)
+        return
+    retired = sorted(final.glob(".meta.old-*"))
+    if retired:
+        retired[-1].rename(final / "meta")
 
 
 def _swap_into_place(build_root: Path, final: Path) -> None:

@@ -12,7 +12,6 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 
 from bagport.bags import open_bag
-from bagport.config import ConvertConfig
 from bagport.contract import FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import Frame, assemble_frames
@@ -67,11 +66,10 @@ def score_manifest(
     manifest_uri: str, contract_uri: str, qa_uri: str | None = None, *, workers: int | None = None
 ) -> list[QAEntry]:
     """Score every bag of a manifest (in parallel processes), in manifest order."""
-    config = ConvertConfig(manifest=manifest_uri, contract=contract_uri, output="unused", qa=qa_uri)
     contract_text = read_text(contract_uri, "contract")
     parse_contract(contract_text, contract_uri)  # a bad contract stops here, once
     qa = load_qa_config(read_text(qa_uri, "qa") if qa_uri else None, qa_uri or "qa.yaml")
-    manifest = load_manifest(config.manifest)
+    manifest = load_manifest(manifest_uri)
     requests = [
         EpisodeRequest(
             episode_id=f"qa-{bag.entry}",

@@ -1,0 +1,93 @@
+"""An existing dataset as the base of an append: what is there, and where new files go.
+
+Appending never rewrites existing data or video files: new episodes go to the files after
+the last existing ones, and only ``meta/`` is replaced (see :mod:`bagport.dataset.write`).
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import pandas as pd
+
+from bagport.dataset.layout import HISTOGRAMS_PATH, INFO_PATH, STATS_PATH, TASKS_PATH, next_chunk_file
+from bagport.errors import DatasetWriteError
+from bagport.stats import FeatureStats, stats_from_json
+
+__all__ = ["DatasetBase", "read_base"]
+
+_CHUNK_FILE = re.compile(r"chunk-(\d+)/file-(\d+)\.\w+$")
+
+
+@dataclass(frozen=True, slots=True)
+class DatasetBase:
+    info: dict[str, Any]
+    tasks: list[str]
+    stats: dict[str, FeatureStats]
+    histograms: dict[str, npt.NDArray[np.int64]]
+    next_data: tuple[int, int]
+    next_video: dict[str, tuple[int, int]]
+    next_episodes: tuple[int, int]
+    next_provenance: tuple[int, int]
+    run_number: int
+    """Runs recorded so far (``meta/provenance/run.json`` is run 0, appends add ``run-001.json``...)."""
+
+    @property
+    def episodes(self) -> int:
+        return int(self.info["total_episodes"])
+
+    @property
+    def frames(self) -> int:
+        return int(self.info["total_frames"])
+
+
+def _next(folder: Path, pattern: str, chunks_size: int) -> tuple[int, int]:
+    found = []
+    for path in folder.glob(pattern):
+        match = _CHUNK_FILE.search(path.as_posix())
+        if match:
+            found.append((int(match.group(1)), int(match.group(2))))
+    if not found:
+        return 0, 0
+    return next_chunk_file(*max(found), chunks_size)
+
+
+def read_base(root: Path) -> DatasetBase:
+    """Read what an append needs from the dataset at ``root`` (local)."""
+    info_path = root / INFO_PATH
+    if not info_path.is_file():
+        raise DatasetWriteError(
+            f"{root} is not a LeRobot dataset (no {INFO_PATH}); nothing was written. Fix: --append needs an "
+            "existing bagport dataset at --output, or leave --append out to create one."
+        )
+    info = json.loads(info_path.read_text())
+    histograms_path = root / HISTOGRAMS_PATH
+    histograms = {
+        key: np.asarray(value, dtype=np.int64)
+        for key, value in (
+            json.loads(histograms_path.read_text()) if histograms_path.is_file() else {}
+        ).items()
+    }
+    raw_stats = json.loads((root / STATS_PATH).read_text())
+    tasks_frame = pd.read_parquet(root / TASKS_PATH)
+    tasks = [str(t) for t in tasks_frame.sort_values("task_index").index]
+    chunks = int(info["chunks_size"])
+    video_keys = [k for k, f in info["features"].items() if f.get("dtype") == "video"]
+    runs = sorted((root / "meta" / "provenance").glob("run*.json"))
+    return DatasetBase(
+        info=info,
+        tasks=tasks,
+        stats={key: stats_from_json(value) for key, value in raw_stats.items()},
+        histograms=histograms,
+        next_data=_next(root / "data", "chunk-*/file-*.parquet", chunks),
+        next_video={key: _next(root / "videos" / key, "chunk-*/file-*.mp4", chunks) for key in video_keys},
+        next_episodes=_next(root / "meta" / "episodes", "chunk-*/file-*.parquet", chunks),
+        next_provenance=_next(root / "meta" / "provenance", "chunk-*/file-*.parquet", chunks),
+        run_number=len(runs),
+    )

@@ -1,0 +1,49 @@
+"""Which bags a dataset already holds, from its provenance run records (for appends and ingestion)."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+from fsspec.core import url_to_fs
+
+from bagport.dataset.layout import INFO_PATH, TASKS_PATH
+from bagport.dataset.write import DatasetReport
+
+__all__ = ["converted_bags", "dataset_report"]
+
+
+def converted_bags(root: str) -> set[tuple[str, str]]:
+    """``(bag URI, source stamp)`` of every episode in the dataset at ``root``.
+
+    Bags a run excluded (failed QA or conversion) are in the set too, so an unchanged bad bag is not
+    retried by every scheduled run; a bag re-recorded or changed since (another stamp) converts again.
+    """
+    fs, path = url_to_fs(root)
+    found: set[tuple[str, str]] = set()
+    for record_path in fs.glob(f"{path.rstrip('/')}/meta/provenance/run*.json"):
+        with fs.open(record_path, "r", encoding="utf-8") as handle:
+            record = json.load(handle)
+        for episode in [*record.get("episodes", []), *record.get("excluded", [])]:
+            found.add((str(episode["bag_uri"]), str(episode.get("source_stamp", ""))))
+    return found
+
+
+def dataset_report(root: str) -> DatasetReport:
+    """The report of a dataset as it stands (a run that had nothing new to add)."""
+    fs, path = url_to_fs(root)
+    with fs.open(f"{path.rstrip('/')}/{INFO_PATH}", "r", encoding="utf-8") as handle:
+        info = json.load(handle)
+    tasks = pd.read_parquet(f"{root.rstrip('/')}/{TASKS_PATH}", storage_options=fs.storage_options)
+    videos = tuple(k for k, f in info["features"].items() if f.get("dtype") == "video")
+    size = sum(int(fs.size(p)) for p in fs.find(path))
+    frames = int(info["total_frames"])
+    return DatasetReport(
+        root,
+        int(info["total_episodes"]),
+        frames,
+        tuple(str(t) for t in tasks.index),
+        videos,
+        size,
+        frames / info["fps"],
+    )

@@ -1,0 +1,124 @@
+"""--append: new episodes as new files, old files untouched, meta updated, re-runs add nothing."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bagport.config import ConvertConfig
+from bagport.dataset.validate import validate_dataset
+from bagport.episode import convert_episode
+from bagport.errors import DatasetWriteError
+from bagport.run import plan_run, reduce_run
+from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+
+CAMERAS = (
+    CameraSpec("front", "raw", "bgr8", height=48, width=64),
+    CameraSpec("wrist", "jpeg", height=48, width=64),
+)
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("bags")
+    for i, name in enumerate(("a", "b", "c")):
+        spec = EpisodeSpec(duration_s=1.0 + 0.2 * i, seed=i, cameras=CAMERAS, task=f"task {name}")
+        write_episode_bag(root / name, "mcap", spec)
+    return root
+
+
+def _convert(
+    bags: Path, names: list[str], out: Path, *, append: bool, contract: Path = SAMPLE_CONTRACT
+) -> int:
+    manifest = bags / f"manifest-{'-'.join(names)}.yaml"
+    manifest.write_text("bags:\n" + "".join(f"  - uri: {n}\n" for n in names))
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(contract), output=str(out), encoder=FAST_CODEC, append=append,
+        staging=str(out) + ".staging",
+    )  # fmt: skip
+    plan = plan_run(config)
+    if not plan.requests:
+        return 0
+    staged = [convert_episode(r).dir_uri for r in plan.requests]
+    reduce_run(plan, staged)
+    return len(plan.requests)
+
+
+def _files(root: Path) -> dict[str, tuple[int, int, bytes]]:
+    return {
+        p.relative_to(root).as_posix(): (p.stat().st_ino, p.stat().st_mtime_ns, p.read_bytes())
+        for folder in ("data", "videos")
+        for p in sorted((root / folder).rglob("*"))
+        if p.is_file()
+    }
+
+
+def test_append_adds_new_files_and_keeps_old_ones_byte_identical(bags: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    assert _convert(bags, ["a", "b"], out, append=True) == 2  # append creates a missing dataset
+    before = _files(out)
+    assert _convert(bags, ["a", "b", "c"], out, append=True) == 1  # only the new bag is converted
+    after = _files(out)
+    assert {k: after[k] for k in before} == before  # same inode, mtime and bytes
+    assert sorted(set(after) - set(before)) == [
+        "data/chunk-000/file-001.parquet",
+        "videos/observation.images.front/chunk-000/file-001.mp4",
+        "videos/observation.images.wrist/chunk-000/file-001.mp4",
+    ]
+    info = json.loads((out / "meta/info.json").read_text())
+    assert (info["total_episodes"], info["total_tasks"], info["splits"]) == (3, 3, {"train": "0:3"})
+    assert sorted(p.name for p in (out / "meta/provenance").glob("run*.json")) == ["run-001.json", "run.json"]
+    appended = json.loads((out / "meta/provenance/run-001.json").read_text())
+    assert [(e["episode_index"], e["bag_uri"].rsplit("/", 1)[-1]) for e in appended["episodes"]] == [(2, "c")]
+    qa = json.loads((out / "meta/qa/summary.json").read_text())
+    assert [e["episode_index"] for e in qa["episodes"]] == [0, 1, 2]
+    assert qa["reports"] == ["report.html", "report-001.html"]
+    report = validate_dataset(out, repo_id="test/append")
+    assert report.episodes == 3
+    assert report.frames_decoded == info["total_frames"]
+
+    # nothing new: nothing converted, nothing changed
+    assert _convert(bags, ["a", "b", "c"], out, append=True) == 0
+    assert _files(out) == after
+
+
+def test_appended_stats_equal_stats_written_in_one_go(bags: Path, tmp_path: Path) -> None:
+    appended, whole = tmp_path / "appended", tmp_path / "whole"
+    _convert(bags, ["a"], appended, append=True)
+    _convert(bags, ["a", "b", "c"], appended, append=True)
+    _convert(bags, ["a", "b", "c"], whole, append=False)
+    a = json.loads((appended / "meta/stats.json").read_text())
+    w = json.loads((whole / "meta/stats.json").read_text())
+    assert a.keys() == w.keys()
+    for key in w:
+        for stat in w[key]:
+            np.testing.assert_allclose(
+                a[key][stat], w[key][stat], rtol=1e-9, atol=1e-12, err_msg=f"{key}/{stat}"
+            )
+
+
+def test_append_with_other_features_is_refused_and_writes_nothing(bags: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    _convert(bags, ["a"], out, append=True)
+    before = sorted(p.relative_to(out).as_posix() for p in out.rglob("*"))
+    contract = tmp_path / "fewer_joints.yaml"
+    contract.write_text(SAMPLE_CONTRACT.read_text().replace("position.j5, position.j6]", "position.j5]"))
+    with pytest.raises(DatasetWriteError, match="cannot append: the new episodes' features differ"):
+        _convert(bags, ["a", "b"], out, append=True, contract=contract)
+    assert sorted(p.relative_to(out).as_posix() for p in out.rglob("*")) == before
+
+
+def test_a_crash_between_the_meta_renames_is_recovered(bags: Path, tmp_path: Path) -> None:
+    out = tmp_path / "ds"
+    _convert(bags, ["a"], out, append=True)
+    os.rename(out / "meta", out / ".meta.old-deadbeef")  # as if the process died mid-swap
+    _convert(bags, ["a", "b"], out, append=True)
+    assert not list(out.glob(".meta.old-*"))
+    assert json.loads((out / "meta/info.json").read_text())["total_episodes"] == 2
+    shutil.rmtree(out.with_name("ds.staging"), ignore_errors=True)

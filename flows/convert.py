@@ -26,7 +26,7 @@ from tasks.episode import convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
 
-__all__ = ["ConversionError", "convert_flow", "run_convert"]
+__all__ = ["ConversionError", "convert_flow", "run_config", "run_convert"]
 
 
 class ConversionError(BagportError):
@@ -139,8 +139,8 @@ def _dask_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
     return runner
 
 
-def run_convert(config: ConvertConfig) -> DatasetReport:
-    """Run the flow with the task runner the config asks for."""
+def run_config(config: ConvertConfig) -> DatasetReport:
+    """Run the conversion flow (or subflow, inside a deployment's flow) with the config's task runner."""
     workers = config.workers or os.cpu_count() or 1
     runner: TaskRunner[Any]
     if config.runner == "dask":
@@ -149,13 +149,19 @@ def run_convert(config: ConvertConfig) -> DatasetReport:
         runner = ProcessPoolTaskRunner(max_workers=workers)
     else:
         runner = ThreadPoolTaskRunner(max_workers=workers)
-    plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
-    with prefect_api():
-        # Prefect types task_runner as TaskRunner[PrefectFuture]; both runners are, but not in its stubs.
-        flow_with_runner = convert_flow.with_options(task_runner=runner)  # type: ignore[arg-type]
-        state = flow_with_runner(config, return_state=True)
+    # Prefect types task_runner as TaskRunner[PrefectFuture]; both runners are, but not in its stubs.
+    flow_with_runner = convert_flow.with_options(task_runner=runner)  # type: ignore[arg-type]
+    state = flow_with_runner(config, return_state=True)
     if not state.is_completed():
         # bagport's own errors arrive as the state message; anything else is a bug worth its traceback
         raise ConversionError(state.message or f"the conversion flow ended {state.name}")
     result: DatasetReport = state.result()  # type: ignore[assignment] # completed: a report
     return result
+
+
+def run_convert(config: ConvertConfig) -> DatasetReport:
+    """The CLI's entry: check the inputs before Prefect starts, then run against the configured API
+    (or one temporary local server)."""
+    plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
+    with prefect_api():
+        return run_config(config)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import shutil
 from pathlib import Path
 
@@ -117,7 +116,7 @@ def test_append_with_other_features_is_refused_and_writes_nothing(bags: Path, tm
 def test_a_crash_between_the_meta_renames_is_recovered(bags: Path, tmp_path: Path) -> None:
     out = tmp_path / "ds"
     _convert(bags, ["a"], out, append=True)
-    os.rename(out / "meta", out / ".meta.old-deadbeef")  # as if the process died mid-swap
+    (out / "meta").rename(out / ".meta.old-deadbeef")  # as if the process died mid-swap
     _convert(bags, ["a", "b"], out, append=True)
     assert not list(out.glob(".meta.old-*"))
     assert json.loads((out / "meta/info.json").read_text())["total_episodes"] == 2

@@ -5,6 +5,7 @@ They show in the Prefect UI on the flow run's Artifacts tab (and under Artifacts
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 from uuid import UUID
 
@@ -17,7 +18,12 @@ from prefect.artifacts import (
 
 from bagport.dataset import DatasetReport
 
-__all__ = ["Progress", "publish_run_artifacts", "qa_table"]
+__all__ = ["LISTENERS", "Progress", "ProgressListener", "publish_run_artifacts", "qa_table"]
+
+
+ProgressListener = Callable[[int, int], None]
+LISTENERS: list[ProgressListener] = []
+"""Called with (done, total) as episodes finish, in the flow's process (the CLI's progress bar)."""
 
 
 class Progress:
@@ -36,6 +42,8 @@ class Progress:
     def advance(self) -> None:
         self._done += 1
         update_progress_artifact(self._id, 100.0 * self._done / self._total, description=self._text())
+        for listener in LISTENERS:
+            listener(self._done, self._total)
 
 
 def qa_table(report: DatasetReport) -> list[dict[str, Any]]:

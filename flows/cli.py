@@ -45,9 +45,21 @@ def _load_encoder(value: str | None) -> dict[str, Any]:
     return data
 
 
+def _progress_bar(done: int, total: int) -> None:
+    width = 30
+    filled = width * done // max(total, 1)
+    print(
+        f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} episodes",
+        end="",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
 def _cmd_convert(args: argparse.Namespace) -> int:
     from bagport.config import ConvertConfig  # noqa: PLC0415
     from bagport.run import summary_json  # noqa: PLC0415
+    from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
     from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
 
     config = ConvertConfig(
@@ -71,8 +83,17 @@ def _cmd_convert(args: argparse.Namespace) -> int:
         on_qa_fail=args.on_qa_fail,
     )
     started = time.perf_counter()
-    report = run_convert(config)
-    print(summary_json(report))
+    show_bar = not args.quiet and sys.stderr.isatty()
+    if show_bar:
+        LISTENERS.append(_progress_bar)
+    try:
+        report = run_convert(config)
+    finally:
+        if show_bar:
+            LISTENERS.remove(_progress_bar)
+            print(file=sys.stderr)
+    if not args.quiet:
+        print(summary_json(report))
     wall_s = time.perf_counter() - started
     for row in report.excluded:
         print(f"excluded bags[{row['manifest_entry']}] {row['bag_uri']}: {row['reason']}", file=sys.stderr)
@@ -210,6 +231,11 @@ def _parser() -> argparse.ArgumentParser:
         default=None,
         help="episodes failing QA or conversion: leave out (default), keep and flag, or fail the run",
     )
+    loudness = convert.add_mutually_exclusive_group()
+    loudness.add_argument(
+        "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
+    )
+    loudness.add_argument("--verbose", action="store_true", help="show Prefect's flow and task logs")
     convert.set_defaults(func=_cmd_convert)
 
     qa = sub.add_parser("qa", help="score bags against a contract without converting them (no video)")
@@ -263,6 +289,12 @@ def _episodes_failed(err: BagportError) -> bool:
 
 def main(argv: Sequence[str] | None = None) -> int:
     args = _parser().parse_args(argv)
+    if getattr(args, "verbose", False):
+        os.environ["PREFECT_LOGGING_LEVEL"] = "INFO"  # before Prefect is imported: task and flow logs
+    elif getattr(args, "quiet", False):
+        os.environ["PREFECT_LOGGING_LEVEL"] = "ERROR"
+    else:
+        os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     func: Callable[[argparse.Namespace], int] = args.func
     try:
         return func(args)

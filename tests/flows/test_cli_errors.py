@@ -98,10 +98,11 @@ def test_a_bad_bag_is_excluded_and_named_the_rest_is_written(tmp_path: Path) -> 
     strict = tmp_path / "strict"
     proc = subprocess.run(
         [sys.executable, "-m", "flows.cli", *_convert(manifest, SAMPLE_CONTRACT, strict), "--runner", "thread",
-         "--on-qa-fail", "fail_run"],
+         "--on-qa-fail", "fail_run", "--quiet"],
         capture_output=True, text=True, check=False, cwd=REPO,
     )  # fmt: skip
     assert "Traceback" not in proc.stderr
+    assert proc.stdout == ""  # --quiet
     assert proc.returncode == 1, proc.stderr
     assert (
         "1 of 2 bag(s) failed QA or conversion and on_fail is 'fail_run'; nothing was written" in proc.stderr
@@ -109,3 +110,14 @@ def test_a_bad_bag_is_excluded_and_named_the_rest_is_written(tmp_path: Path) -> 
     assert "bags[1]" in proc.stderr
     assert not strict.exists()
     assert len(list((tmp_path / "strict.staging" / "episodes").glob("good-*/episode.json"))) == 1
+
+
+def test_progress_bar_and_loudness_flags(capfd: pytest.CaptureFixture[str]) -> None:
+    from flows.cli import _progress_bar  # noqa: PLC0415
+
+    _progress_bar(3, 12)
+    assert capfd.readouterr().err == "\r[#######.......................] 3/12 episodes"
+    with pytest.raises(SystemExit) as info:
+        main(["convert", "--manifest", "m", "--contract", "c", "--output", "o", "--quiet", "--verbose"])
+    assert info.value.code == 2
+    assert "not allowed with argument" in capfd.readouterr().err

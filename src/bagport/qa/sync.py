@@ -42,7 +42,15 @@ def sync_checks(
 ) -> tuple[list[CheckResult], dict[str, Any]]:
     """Camera-to-action gap per camera (vs the first action source), and alignment error histograms."""
     plots = {f"{s.key}@{s.topic}": _histogram(np.abs(ticks_ns - s.used_ns)[s.valid] / 1e6) for s in sources}
-    checks: list[CheckResult] = []
+    steps_ns = np.diff(ticks_ns)
+    backwards = int((steps_ns <= 0).sum())
+    checks = [
+        CheckResult(
+            "time.output_monotonic", "episode", float(backwards), "fail" if backwards else "pass", True,
+            f"{backwards} frame timestamp(s) not after the previous one" if backwards
+            else f"{ticks_ns.size} frame timestamps strictly increasing",
+        )
+    ]  # fmt: skip
     action = next((s for s in sources if s.key == "action" or s.key.startswith("action.")), None)
     if action is not None:
         limit_ms = config.camera_action_gap_ms

@@ -66,6 +66,7 @@ def test_clean_episode_passes_every_check_including_images(tmp_path: Path) -> No
     assert qa.problems == []
     assert (qa.verdict, qa.score) == ("pass", 1.0)
     assert summary.qa["verdict"] == "pass"
+    assert _check(qa, "time.output_monotonic", "episode").value == 0
     groups = {c.check.split(".")[0] for c in qa.checks}
     assert groups == {"coverage", "rates", "time", "values", "content"}
     assert {c.subject for c in qa.checks if c.check == "values.frozen_image_s"} == {

@@ -53,7 +53,8 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         with tags(f"robot:{plan.contract.robot_type}", f"bag:{label}"):
             futures.append(convert_episode_task.submit(request.to_dict(), label=label))
     progress = Progress(len(futures))
-    for _ in as_completed(futures):
+    for done in as_completed(futures):
+        done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
         progress.advance()
     staged: list[dict[str, Any]] = []
     failures: list[EpisodeFailure] = []

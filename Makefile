@@ -1,4 +1,4 @@
-.PHONY: setup demo test lint
+.PHONY: setup demo test lint bench
 
 setup:
 	@bash scripts/setup.sh
@@ -8,3 +8,6 @@ demo: setup
 
 test: setup
 	@bash scripts/test.sh
+
+bench: setup
+	@bash -c 'source scripts/env.sh && .venv/bin/python bench/run.py $(BENCH_ARGS)'

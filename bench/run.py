@@ -1,0 +1,175 @@
+"""`make bench`: bagport vs the LeRobot-writer baseline vs the codec floor, on W1/W2/W3.
+
+Each tool runs as a fresh process tree on the same generated bags; wall time, CPU seconds (the
+tree's, from the kernel's child accounting), peak RSS of the whole tree (sampled every 0.2 s) and
+output size are recorded; numbers are medians over ``--runs``. Results go to bench/results.json
+and into BENCHMARKS.md between the result markers (the rest of that file is prose, kept as is).
+
+Usage: python bench/run.py [--workloads W1,W2,W3] [--tools bagport,lerobot,lerobot-streaming,floor]
+                           [--runs 3] [--scale 1.0] [--data bench/.data] [--report BENCHMARKS.md]
+                           [--results bench/results.json] [--keep-outputs]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import resource
+import shutil
+import statistics
+import subprocess
+import sys
+import time
+from importlib.metadata import version
+from pathlib import Path
+from typing import Any
+
+import psutil
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.workloads import WORKLOADS, ensure_workload
+
+BENCH = Path(__file__).resolve().parent
+REPO = BENCH.parent
+START, END = "<!-- results:start -->", "<!-- results:end -->"
+TOOLS = ("bagport", "lerobot", "lerobot-streaming", "floor")
+
+
+def _command(tool: str, workload: Path, out: Path) -> list[str]:
+    python = sys.executable
+    if tool == "bagport":
+        return [
+            str(Path(python).with_name("bagport")), "convert", "--manifest", str(workload / "manifest.yaml"),
+            "--contract", str(workload / "contract.yaml"), "--output", str(out), "--quiet",
+        ]  # fmt: skip
+    if tool == "lerobot":
+        return [python, str(BENCH / "baseline_lerobot.py"), str(workload), str(out)]
+    if tool == "lerobot-streaming":
+        return [python, str(BENCH / "baseline_lerobot.py"), str(workload), str(out), "--streaming"]
+    return [python, str(BENCH / "codec_floor.py"), str(workload), str(out)]
+
+
+def measure(command: list[str], out: Path) -> dict[str, float]:
+    """Run one command; wall, CPU seconds and peak RSS of its whole process tree, output size."""
+    shutil.rmtree(out, ignore_errors=True)
+    shutil.rmtree(out.with_name(out.name + ".staging"), ignore_errors=True)
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    started = time.perf_counter()
+    proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    peak = 0
+    while proc.poll() is None:
+        try:
+            tree = [proc, *proc.children(recursive=True)]
+            peak = max(peak, sum(p.memory_info().rss for p in tree if p.is_running()))
+        except psutil.Error:
+            pass
+        time.sleep(0.2)
+    wall = time.perf_counter() - started
+    stderr = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{command[:3]} failed ({proc.returncode}):\n{stderr[-3000:]}")
+    size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.exists() else 0
+    cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+    return {"wall_s": wall, "cpu_s": cpu, "peak_rss_mb": peak / 2**20, "output_mb": size / 1e6}
+
+
+def _machine() -> dict[str, Any]:
+    model = "unknown"
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        model = next(
+            (
+                ln.split(":", 1)[1].strip()
+                for ln in cpuinfo.read_text().splitlines()
+                if ln.startswith("model name")
+            ),
+            model,
+        )
+    return {
+        "cores": os.cpu_count(),
+        "cpu": model,
+        "memory_gb": round(psutil.virtual_memory().total / 2**30, 1),
+        "python": platform.python_version(),
+        "versions": {p: version(p) for p in ("bagport", "lerobot", "av", "prefect", "rosbags")},
+    }
+
+
+def _table(results: dict[str, Any]) -> str:
+    lines = [f"Machine: {results['machine']['cores']} cores, {results['machine']['cpu']}, "
+             f"{results['machine']['memory_gb']} GB; versions {results['machine']['versions']}; "
+             f"runs per cell: {results['runs']}, scale {results['scale']}.", ""]  # fmt: skip
+    for name, workload in results["workloads"].items():
+        lines += [f"**{name}** ({workload['description']}; {workload['recorded_s']:.0f} s recorded)", ""]
+        lines += ["| tool | wall s | recorded s / wall s | CPU s | peak RSS MB | output MB | bagport / this |",
+                  "|---|---|---|---|---|---|---|"]  # fmt: skip
+        tools = workload["tools"]
+        ours = tools.get("bagport", {}).get("wall_s")
+        for tool, m in tools.items():
+            ratio = f"{m['wall_s'] / ours:.2f}x faster" if ours and tool != "bagport" else ""
+            if ours and tool == "floor":
+                ratio = f"bagport takes {ours / m['wall_s']:.2f}x the floor"
+            lines.append(
+                f"| {tool} | {m['wall_s']:.1f} | {workload['recorded_s'] / m['wall_s']:.2f} | {m['cpu_s']:.1f} | "
+                f"{m['peak_rss_mb']:.0f} | {m['output_mb']:.1f} | {ratio} |"
+            )
+        lines.append("")
+    return "\n".join(lines)
+
+
+def write_report(results: dict[str, Any], report: Path) -> None:
+    table = f"{START}\n{_table(results)}\n{END}"
+    text = report.read_text() if report.exists() else f"# Benchmarks\n\n{START}\n{END}\n"
+    if START in text and END in text:
+        text = text[: text.index(START)] + table + text[text.index(END) + len(END) :]
+    else:
+        text += "\n" + table + "\n"
+    report.write_text(text)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--workloads", default="W1,W2,W3")
+    parser.add_argument("--tools", default=",".join(TOOLS))
+    parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument("--scale", type=float, default=1.0)
+    parser.add_argument("--data", type=Path, default=BENCH / ".data")
+    parser.add_argument("--report", type=Path, default=REPO / "BENCHMARKS.md")
+    parser.add_argument("--results", type=Path, default=BENCH / "results.json")
+    parser.add_argument(
+        "--keep-outputs", action="store_true", help="keep each tool's last output under DATA/out"
+    )
+    args = parser.parse_args()
+    tools = [t for t in args.tools.split(",") if t]
+    results: dict[str, Any] = {"machine": _machine(), "runs": args.runs, "scale": args.scale, "workloads": {}}
+    for name in args.workloads.split(","):
+        workload = WORKLOADS[name].scaled(args.scale)
+        print(
+            f"{name}: generating {workload.episodes} x {workload.duration_s:g} s ...",
+            file=sys.stderr,
+            flush=True,
+        )
+        folder = ensure_workload(workload, args.data)
+        cells: dict[str, Any] = {}
+        for tool in tools:
+            runs = [measure(_command(tool, folder, args.data / "out" / f"{name}-{tool}"), args.data / "out" / f"{name}-{tool}")
+                    for _ in range(args.runs)]  # fmt: skip
+            cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]}
+            print(f"{name} {tool}: {cells[tool]}", file=sys.stderr, flush=True)
+        results["workloads"][name] = {
+            "description": workload.description,
+            "recorded_s": workload.recorded_s,
+            "tools": cells,
+        }
+        args.results.write_text(json.dumps(results, indent=1))
+        write_report(results, args.report)
+    if not args.keep_outputs:
+        shutil.rmtree(args.data / "out", ignore_errors=True)
+
+
+if __name__ == "__main__":
+    main()

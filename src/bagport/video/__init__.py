@@ -1,17 +1,23 @@
-"""Video: streaming encoder, remux concatenation, probing and decoding."""
+"""Video: streaming encoder, remux concatenation, probing, decoding and fidelity checks."""
 
 from __future__ import annotations
 
 from bagport.video.encode import ClipInfo, StreamingEncoder
+from bagport.video.fidelity import ClipFidelity, FidelityParams, FidelityRecorder, FramePair, compare_clip
 from bagport.video.remux import ClipPlacement, VideoStreamInfo, concat_clips, iter_frames, probe_video
 from bagport.video.settings import EncoderSettings
 
 __all__ = [
+    "ClipFidelity",
     "ClipInfo",
     "ClipPlacement",
     "EncoderSettings",
+    "FidelityParams",
+    "FidelityRecorder",
+    "FramePair",
     "StreamingEncoder",
     "VideoStreamInfo",
+    "compare_clip",
     "concat_clips",
     "iter_frames",
     "probe_video",

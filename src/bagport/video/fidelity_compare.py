@@ -1,0 +1,239 @@
+"""Decode a clip and score each sampled frame against block-mean references (see ``fidelity``)."""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from fractions import Fraction
+from pathlib import Path
+from typing import Any
+
+import av
+import numpy as np
+import numpy.typing as npt
+
+from bagport.errors import VideoError
+from bagport.video.blockmeans import BlockGrid
+
+__all__ = ["FidelityParams", "FramePair", "FrameScores", "compare_frames"]
+
+_RED = np.array([255, 0, 0], np.uint8)
+
+
+@dataclass(frozen=True, slots=True)
+class FidelityParams:
+    """Thresholds of ``compare_clip``; ``*_levels`` are 8-bit intensity levels (0-255).
+
+    Chosen on synthetic clips (tests/bagport/video/test_fidelity.py patterns, 120x160 and
+    240x320): the error of a block mean is ~1.3 levels for flat colours after any 8-bit YUV
+    round trip, 0.06-0.7 for a lossless yuv444p encode. Honest coding loss stays below the
+    floor: the worst block of a noisy textured scene is 16-19 levels under libsvtav1 crf 30-50
+    and 13-27 under libx264 crf 35-45 (median 3-6 there, hence ``block_k``), 10-13 for libx264
+    crf 23 on the squares pattern. Stale squares and foreign blocks under libsvtav1 crf 30 are
+    35-57 levels off. ``copy_*``: a copied frame is much closer to an earlier source frame than
+    to its own, and its own error is above the ~1.3-level colour round-trip noise.
+    """
+
+    block_k: float = 6.0
+    block_floor_levels: float = 24.0
+    min_damaged_blocks: int = 1
+    copy_ratio: float = 3.0
+    copy_floor_levels: float = 1.5
+    copy_lookback: int = 2
+    psnr_cap_db: float = 99.0
+    per_frame: bool = False
+    max_listed_frames: int = 50
+
+
+@dataclass(frozen=True, slots=True)
+class FramePair:
+    """One decoded frame beside its source reference, for display (all uint8 ``h x w x 3``).
+
+    The source is only known by its block means, so ``reference_blocks_rgb`` is a mosaic;
+    ``decoded_blocks_rgb`` is the decoded frame reduced the same way (the images compared).
+    """
+
+    index: int
+    block: int
+    psnr_db: float
+    damaged_blocks: int
+    copy_of: int | None
+    decoded_rgb: npt.NDArray[np.uint8] = field(repr=False)
+    decoded_blocks_rgb: npt.NDArray[np.uint8] = field(repr=False)
+    reference_blocks_rgb: npt.NDArray[np.uint8] = field(repr=False)
+    damaged_mask: npt.NDArray[np.bool_] = field(repr=False)
+
+    def side_by_side(self, gap_px: int = 4) -> npt.NDArray[np.uint8]:
+        """Source mosaic | decoded mosaic | decoded frame with damaged blocks outlined in red."""
+        outlined = self.decoded_rgb.copy()
+        height, width = outlined.shape[:2]
+        block = self.block
+        for row, col in np.argwhere(self.damaged_mask)[:500]:
+            top, left = int(row) * block, int(col) * block
+            bottom, right = min(top + block, height) - 1, min(left + block, width) - 1
+            outlined[top : bottom + 1, [left, right]] = _RED
+            outlined[[top, bottom], left : right + 1] = _RED
+        spacer = np.full((height, gap_px, 3), 255, np.uint8)
+        parts = [self.reference_blocks_rgb, spacer, self.decoded_blocks_rgb, spacer, outlined]
+        return np.concatenate(parts, axis=1)
+
+
+@dataclass(slots=True)
+class FrameScores:
+    """Per sampled frame scores (small arrays, not images) and the clip-level checks."""
+
+    frame_index: npt.NDArray[np.int64]
+    psnr_db: npt.NDArray[np.float32]
+    damaged_blocks: npt.NDArray[np.int32]
+    copy_of: npt.NDArray[np.int64]  # -1: not a copy
+    damaged: npt.NDArray[np.bool_]
+    frames_decoded: int = 0
+    first_bad_pts_frame: int | None = None
+    decode_error: str | None = None
+    worst: FramePair | None = None
+
+    def trim(self, count: int) -> None:
+        self.frame_index = self.frame_index[:count]
+        self.psnr_db = self.psnr_db[:count]
+        self.damaged_blocks = self.damaged_blocks[:count]
+        self.copy_of = self.copy_of[:count]
+        self.damaged = self.damaged[:count]
+
+
+@dataclass(slots=True)
+class _Worst:
+    key: tuple[bool, int, float] = (False, -1, 0.0)
+    index: int = -1
+    psnr_db: float = 0.0
+    damaged_blocks: int = 0
+    copy_of: int | None = None
+    decoded: npt.NDArray[np.uint8] | None = None
+    decoded_means: npt.NDArray[np.float32] | None = None
+    reference_means: npt.NDArray[np.float32] | None = None
+    mask: npt.NDArray[np.bool_] | None = None
+
+
+def compare_frames(
+    mp4_path: str | Path,
+    refs: npt.NDArray[np.float16],
+    grid: BlockGrid,
+    sample_every: int,
+    fps: int | None,
+    params: FidelityParams,
+) -> FrameScores:
+    """Decode every frame of ``mp4_path``; score frames ``0, n, 2n, ...`` against ``refs``."""
+    size = len(refs)
+    scores = FrameScores(
+        frame_index=np.zeros(size, np.int64),
+        psnr_db=np.zeros(size, np.float32),
+        damaged_blocks=np.zeros(size, np.int32),
+        copy_of=np.full(size, -1, np.int64),
+        damaged=np.zeros(size, np.bool_),
+    )
+    worst = _Worst()
+    recent: deque[tuple[int, npt.NDArray[np.float32]]] = deque(maxlen=max(params.copy_lookback, 0))
+    done = 0
+    container = _open(mp4_path, grid)
+    try:
+        stream = container.streams.video[0]
+        period_s = _frame_period_s(stream, fps)
+        time_base = Fraction(stream.time_base) if stream.time_base else None
+        for n, frame in enumerate(container.decode(stream)):
+            scores.frames_decoded = n + 1
+            if scores.first_bad_pts_frame is None and (
+                frame.pts is None or time_base is None or frame.pts * time_base != n * period_s
+            ):
+                scores.first_bad_pts_frame = n
+            sample, offset = divmod(n, sample_every)
+            if offset or sample >= size:
+                continue
+            rgb = frame.to_ndarray(format="rgb24")
+            decoded = grid.means(rgb)
+            reference = refs[sample].astype(np.float32)
+            psnr, mask, copy_of = _score(decoded, reference, recent, params)
+            recent.append((n, reference))
+            blocks = int(mask.sum())
+            is_damaged = blocks >= params.min_damaged_blocks or copy_of is not None
+            scores.frame_index[sample] = n
+            scores.psnr_db[sample] = psnr
+            scores.damaged_blocks[sample] = blocks
+            scores.copy_of[sample] = -1 if copy_of is None else copy_of
+            scores.damaged[sample] = is_damaged
+            done = sample + 1
+            key = (is_damaged, blocks, -psnr)
+            if key > worst.key:
+                worst = _Worst(key, n, psnr, blocks, copy_of, rgb, decoded, reference, mask)
+    except av.error.FFmpegError as err:
+        scores.decode_error = f"decoding stopped after frame {scores.frames_decoded}: {err}"
+    finally:
+        container.close()
+    scores.trim(done)
+    scores.worst = _frame_pair(worst, grid)
+    return scores
+
+
+def _open(mp4_path: str | Path, grid: BlockGrid) -> Any:
+    try:
+        container: Any = av.open(str(mp4_path))
+    except av.error.FFmpegError as err:
+        raise VideoError(f"{mp4_path}: cannot open the clip to check its fidelity ({err})") from err
+    if not container.streams.video:
+        container.close()
+        raise VideoError(f"{mp4_path}: no video stream to check")
+    stream = container.streams.video[0]
+    stream.thread_type = "AUTO"
+    ctx = stream.codec_context
+    if (int(ctx.height), int(ctx.width)) != (grid.height, grid.width):
+        container.close()
+        raise VideoError(
+            f"{mp4_path}: the clip is {ctx.width}x{ctx.height} but the recorder saw {grid.width}x"
+            f"{grid.height} frames. Fix: record the frames exactly as they are given to the encoder."
+        )
+    return container
+
+
+def _frame_period_s(stream: Any, fps: int | None) -> Fraction:
+    rate = fps or stream.average_rate or stream.guessed_rate
+    return 1 / Fraction(rate) if rate else Fraction(0)
+
+
+def _score(
+    decoded: npt.NDArray[np.float32],
+    reference: npt.NDArray[np.float32],
+    recent: deque[tuple[int, npt.NDArray[np.float32]]],
+    params: FidelityParams,
+) -> tuple[float, npt.NDArray[np.bool_], int | None]:
+    diff = decoded - reference
+    block_err = np.abs(diff).mean(axis=2)
+    mse = float(np.mean(diff * diff))
+    psnr = params.psnr_cap_db if mse <= 0 else min(params.psnr_cap_db, 10 * math.log10(255.0**2 / mse))
+    threshold = max(params.block_k * float(np.median(block_err)), params.block_floor_levels)
+    mask = block_err > threshold
+    own = float(block_err.mean())
+    copy_of: int | None = None
+    if own > params.copy_floor_levels:
+        best = own / params.copy_ratio
+        for index, previous in recent:
+            other = float(np.abs(decoded - previous).mean())
+            if other < best:
+                best, copy_of = other, index
+    return psnr, mask, copy_of
+
+
+def _frame_pair(worst: _Worst, grid: BlockGrid) -> FramePair | None:
+    if worst.decoded is None or worst.decoded_means is None or worst.reference_means is None:
+        return None
+    if worst.mask is None:
+        return None
+    return FramePair(
+        index=worst.index,
+        block=grid.block,
+        psnr_db=worst.psnr_db,
+        damaged_blocks=worst.damaged_blocks,
+        copy_of=worst.copy_of,
+        decoded_rgb=worst.decoded,
+        decoded_blocks_rgb=grid.mosaic(worst.decoded_means),
+        reference_blocks_rgb=grid.mosaic(worst.reference_means),
+        damaged_mask=worst.mask,
+    )

@@ -12,4 +12,4 @@ if ! python3 -m uv --version >/dev/null 2>&1; then
   python3 -m pip install --quiet --disable-pip-version-check 'uv==0.13.9'
 fi
 # --locked: install exactly uv.lock; the lerobot extra is the real consumer used by `bagport validate` and the tests.
-python3 -m uv sync --locked --all-extras --quiet
+python3 -m uv sync --locked --all-extras --quiet --compile-bytecode

@@ -57,6 +57,18 @@ def _progress_bar(done: int, total: int) -> None:
 
 
 def _cmd_convert(args: argparse.Namespace) -> int:
+    from flows.local_server import launch, take_launched  # noqa: PLC0415 - standard library only
+
+    launch()  # the temporary Prefect server boots while the imports below run
+    try:
+        return _convert(args)
+    finally:
+        unused = take_launched()  # the run failed before it needed the server
+        if unused is not None:
+            unused.stop()
+
+
+def _convert(args: argparse.Namespace) -> int:
     from bagport.config import ConvertConfig  # noqa: PLC0415
     from bagport.run import summary_json  # noqa: PLC0415
     from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect

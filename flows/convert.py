@@ -22,6 +22,7 @@ from bagport.dataset.history import dataset_report
 from bagport.errors import BagportError
 from bagport.run import EpisodeFailure, plan_run
 from flows.artifacts import Progress, publish_run_artifacts
+from flows.local_server import take_launched
 from tasks.episode import convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
@@ -91,8 +92,19 @@ def prefect_api() -> Iterator[None]:
     """Use the configured Prefect API, else one temporary local server shared by every worker.
 
     Without this, each process-pool worker would start a temporary server of its own
-    (15-20 s each here), because Prefect does not pass its ephemeral server's URL on.
+    (15-20 s each here), because Prefect does not pass its ephemeral server's URL on. The CLI
+    launches the server before its heavy imports (:func:`flows.local_server.launch`), so it
+    boots while bagport and Prefect import.
     """
+    launched = take_launched()
+    if launched is not None:
+        try:
+            launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
+            with _draining():
+                yield
+        finally:
+            launched.stop()
+        return
     if get_current_settings().api.url:
         yield
         return
@@ -103,19 +115,24 @@ def prefect_api() -> Iterator[None]:
     previous = os.environ.get("PREFECT_API_URL")
     os.environ["PREFECT_API_URL"] = server.api_url
     try:
-        with temporary_settings({PREFECT_API_URL: server.api_url}):
-            try:
-                yield
-            finally:
-                # Deliver queued logs and events while the server still listens.
-                APILogWorker.drain_all(timeout=10)
-                EventsWorker.drain_all(timeout=10)
+        with temporary_settings({PREFECT_API_URL: server.api_url}), _draining():
+            yield
     finally:
         if previous is None:
             os.environ.pop("PREFECT_API_URL", None)
         else:
             os.environ["PREFECT_API_URL"] = previous
         server.stop()
+
+
+@contextmanager
+def _draining() -> Iterator[None]:
+    """Deliver queued logs and events while the server still listens."""
+    try:
+        yield
+    finally:
+        APILogWorker.drain_all(timeout=10)
+        EventsWorker.drain_all(timeout=10)
 
 
 def _dask_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:

@@ -21,7 +21,7 @@ from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
 from bagport.episode.checks import bag_fingerprint, check_bag_fits
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
-from bagport.episode.sinks import FrameTableWriter, ProvenanceWriter
+from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
 from bagport.episode.timeline import scan_timeline
 from bagport.errors import DecodeError
@@ -57,7 +57,6 @@ class _EpisodeSinks:
         vector_dtypes = {f.key: f.dtype for f in self.plan.features if f.kind is FeatureKind.VECTOR}
         (self.workdir / "videos").mkdir(parents=True, exist_ok=True)
         self.frames = FrameTableWriter(self.workdir / FRAMES_FILE, self.plan.fps, vector_dtypes)
-        self.provenance = ProvenanceWriter(self.workdir / PROVENANCE_FILE)
         self.encoders: dict[str, StreamingEncoder] = {}
         self.image_stats: dict[str, ImageStatsAccumulator] = {}
         self.widths: dict[str, int] = {}
@@ -87,14 +86,11 @@ class _EpisodeSinks:
                     fix="select a fixed set of dimensions with selector.names.",
                 )
         self.monitor.add_vectors(frame.index, frame.vectors)
-        for source in frame.sources:
-            self.provenance.add_source(frame.index, frame.tick_ns, source)
         self.frames.add(frame.index, self.frame_tasks[frame.index], frame.vectors)
 
     def close(self) -> dict[str, Any]:
         """Close every writer; returns video clip infos by key."""
         self.frames.close()
-        self.provenance.close()
         return {key: enc.close() for key, enc in self.encoders.items()}
 
 
@@ -125,6 +121,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 assemble_frames(reader, request.bag_uri, plan.features, sources, ticks, sinks.on_frame)
             finally:
                 clips = sinks.close()
+            write_provenance(workdir / PROVENANCE_FILE, sources, ticks)
             extra = [
                 *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
                 task_check(qa_config, frame_tasks),

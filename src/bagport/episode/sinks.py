@@ -1,4 +1,4 @@
-"""Streaming writers for the per-episode frame table and provenance table.
+"""Writers for the per-episode frame table (streamed as frames arrive) and provenance table.
 
 Rows are buffered in small batches and written as they fill, so memory does not
 grow with episode length.
@@ -6,6 +6,7 @@ grow with episode length.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -17,9 +18,10 @@ import pyarrow.parquet as pq
 if TYPE_CHECKING:
     from bagport.episode.assemble import AlignedSource
 
-__all__ = ["FrameTableWriter", "ProvenanceWriter", "vector_type"]
+__all__ = ["FrameTableWriter", "vector_type", "write_provenance"]
 
 _BATCH_ROWS = 1024
+Int64Array = npt.NDArray[np.int64]
 
 
 def vector_type(dtype: str, width: int) -> pa.DataType:
@@ -93,41 +95,66 @@ PROVENANCE_SCHEMA = pa.schema(
 )
 
 
-class ProvenanceWriter:
-    """One row per frame and contract source: which message fed it, and its times."""
+def write_provenance(path: Path, sources: Sequence[AlignedSource], ticks_ns: Int64Array) -> None:
+    """One row per frame and contract source (frame-major): which message fed it, and its times.
 
-    def __init__(self, path: Path) -> None:
-        self._writer = pq.ParquetWriter(path, PROVENANCE_SCHEMA, compression="zstd")
-        self._rows: dict[str, list[Any]] = {name: [] for name in PROVENANCE_SCHEMA.names}
+    Built from the per-tick selections with numpy, a block of frames at a time: no Python
+    work per frame, and memory bounded by the block whatever the episode length.
+    """
+    with pq.ParquetWriter(path, PROVENANCE_SCHEMA, compression="zstd") as writer:
+        for start in range(0, max(int(ticks_ns.size), 1), _BATCH_ROWS * 16):
+            frames = np.arange(start, min(start + _BATCH_ROWS * 16, int(ticks_ns.size)), dtype=np.int64)
+            if frames.size == 0:
+                break
+            parts = [_source_block(source, frames, ticks_ns) for source in sources]
+            order = np.argsort(np.concatenate([frames] * len(parts)), kind="stable")
+            block = pa.concat_tables(parts).take(order)
+            writer.write_table(block)
 
-    def add_source(self, frame_index: int, tick_ns: int, source: AlignedSource) -> None:
-        """The message(s) behind ``source``'s value at this frame, with both clocks."""
-        rows = self._rows
-        sel = source.selection
-        lo = int(sel.lo[frame_index])
-        hi = int(sel.hi[frame_index]) if sel.hi is not None else -1
-        weight = float(sel.weight[frame_index]) if sel.weight is not None else None
-        header = source.timeline.header_ns
-        rows["frame_index"].append(frame_index)
-        rows["key"].append(source.src.key)
-        rows["topic"].append(source.src.topic)
-        rows["tick_ns"].append(tick_ns)
-        rows["source_log_ns"].append(int(source.timeline.log_ns[lo]) if lo >= 0 else None)
-        rows["source_header_ns"].append(int(header[lo]) if lo >= 0 and header is not None else None)
-        rows["stamp_used"].append(source.stamp_used)
-        rows["message_index"].append(lo if lo >= 0 else None)
-        rows["message_index_next"].append(hi if hi >= 0 and weight else None)
-        rows["weight"].append(weight if weight else None)
-        rows["fill"].append(source.src.fill if bool(source.filled[frame_index]) else None)
-        if len(rows["frame_index"]) >= _BATCH_ROWS * 4:
-            self._flush()
 
-    def _flush(self) -> None:
-        if not self._rows["frame_index"]:
-            return
-        self._writer.write_table(pa.table(self._rows, schema=PROVENANCE_SCHEMA))
-        self._rows = {name: [] for name in PROVENANCE_SCHEMA.names}
+def _source_block(source: AlignedSource, frames: Int64Array, ticks_ns: Int64Array) -> pa.Table:
+    sel = source.selection
+    lo = sel.lo[frames]
+    valid = lo >= 0
+    at = np.maximum(lo, 0)
+    header = source.timeline.header_ns
+    if sel.hi is not None and sel.weight is not None:
+        weight = sel.weight[frames].astype(np.float64)
+        blended = weight > 0
+        hi = sel.hi[frames]
+        next_index = _array(hi, ~(blended & (hi >= 0)))
+        weights = _array(weight, ~blended)
+    else:
+        next_index = pa.nulls(frames.size, pa.int64())
+        weights = pa.nulls(frames.size, pa.float64())
+    filled = source.filled[frames]
+    size = int(frames.size)
+    return pa.Table.from_arrays(
+        [
+            _array(frames),
+            _constant(source.src.key, size),
+            _constant(source.src.topic, size),
+            _array(ticks_ns[frames]),
+            _array(source.timeline.log_ns[at], ~valid),
+            _array(header[at], ~valid) if header is not None else pa.nulls(size, pa.int64()),
+            _constant(source.stamp_used, size),
+            _array(lo, ~valid),
+            next_index,
+            weights,
+            _constant(source.src.fill, size, present=filled),
+        ],
+        schema=PROVENANCE_SCHEMA,
+    )
 
-    def close(self) -> None:
-        self._flush()
-        self._writer.close()
+
+def _array(values: npt.NDArray[Any], null: npt.NDArray[np.bool_] | None = None) -> pa.Array[Any]:
+    array: pa.Array[Any] = pa.array(values, mask=null)
+    return array
+
+
+def _constant(value: str, size: int, present: npt.NDArray[np.bool_] | None = None) -> pa.Array[Any]:
+    """``value`` on every row (or on the ``present`` rows, null elsewhere), dictionary-encoded."""
+    indices = np.zeros(size, dtype=np.int32)
+    mask = None if present is None else ~present
+    array: pa.Array[Any] = pa.DictionaryArray.from_arrays(indices, pa.array([value], pa.string()), mask=mask)
+    return array

@@ -1,0 +1,154 @@
+"""A temporary local Prefect server, started before the heavy imports so the two overlap.
+
+Without a configured ``PREFECT_API_URL`` Prefect starts the same server itself (its
+``SubprocessASGIServer``), but only once the flow is called: after bagport, Prefect and the
+server module are imported in the parent (~4 s) and then the server boots (~5 s), one after
+the other. Launching the server process first, with nothing but the standard library, lets it
+boot while the CLI imports and plans. The command and environment mirror Prefect's own
+(``prefect.server.api.server.SubprocessASGIServer._run_uvicorn_command``).
+
+This module imports no Prefect code: ``flows.cli`` calls :func:`launch` before anything heavy.
+"""
+
+from __future__ import annotations
+
+import atexit
+import importlib.util
+import os
+import socket
+import subprocess
+import sys
+import time
+import tomllib
+import urllib.error
+import urllib.request
+from pathlib import Path
+from typing import Any
+
+__all__ = ["LocalServer", "api_configured", "launch", "take_launched"]
+
+
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+class LocalServer:
+    """One ``uvicorn`` process serving Prefect's API on a free loopback port."""
+
+    def __init__(self) -> None:
+        spec = importlib.util.find_spec("prefect")
+        if spec is None or spec.origin is None:
+            raise RuntimeError("Prefect is not installed")
+        self.port = _free_port()
+        self.api_url = f"http://127.0.0.1:{self.port}/api"
+        env = {
+            **os.environ,
+            "PREFECT_UI_ENABLED": "0",
+            "PREFECT__SERVER_EPHEMERAL": "1",
+            "PREFECT__SERVER_FINAL": "1",
+        }
+        env.pop("PREFECT_API_URL", None)
+        self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
+            [
+                sys.executable, "-m", "uvicorn",
+                "--app-dir", str(Path(spec.origin).parent.parent),
+                "--factory", "prefect.server.api.server:create_app",
+                "--host", "127.0.0.1", "--port", str(self.port),
+                "--log-level", "error", "--lifespan", "on",
+            ],
+            env=env,
+        )  # fmt: skip
+        atexit.register(self.stop)  # also when the CLI fails before the flow starts
+
+    def wait_ready(self, timeout_s: float) -> None:
+        """Block until the API answers its health check; raises ``RuntimeError`` after ``timeout_s``."""
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if self._process is None or self._process.poll() is not None:
+                code = None if self._process is None else self._process.returncode
+                raise RuntimeError(f"the temporary Prefect server exited (code {code}) before it was ready")
+            try:
+                with urllib.request.urlopen(f"{self.api_url}/health", timeout=2) as response:
+                    if response.status == 200:
+                        return
+            except (urllib.error.URLError, ConnectionError, TimeoutError):
+                pass
+            time.sleep(0.1)
+        raise RuntimeError(
+            f"the temporary Prefect server did not answer within {timeout_s:g} s; "
+            "set PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS higher on a slow machine, "
+            "or point PREFECT_API_URL at a running server"
+        )
+
+    def stop(self) -> None:
+        if self._process is None:
+            return
+        if os.environ.get("PREFECT_API_URL") == self.api_url:
+            del os.environ["PREFECT_API_URL"]
+        self._process.terminate()
+        try:
+            self._process.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            self._process.wait()
+        self._process = None
+
+
+_launched: LocalServer | None = None
+
+
+def api_configured() -> bool:
+    """Whether Prefect has an API URL from the environment, the active profile, or project settings.
+
+    Read without importing Prefect, from the places Prefect reads it: ``PREFECT_API_URL``,
+    the active profile in ``profiles.toml``, ``.env``, ``prefect.toml`` and ``pyproject.toml``
+    (``[tool.prefect]``) in the working directory.
+    """
+    if os.environ.get("PREFECT_API_URL"):
+        return True
+    home = Path(os.environ.get("PREFECT_HOME") or Path.home() / ".prefect")
+    profiles_path = Path(os.environ.get("PREFECT_PROFILES_PATH") or home / "profiles.toml")
+    try:
+        profiles = tomllib.loads(profiles_path.read_text())
+    except (OSError, tomllib.TOMLDecodeError):
+        profiles = {}
+    active = os.environ.get("PREFECT_PROFILE") or profiles.get("active") or "ephemeral"
+    if profiles.get("profiles", {}).get(active, {}).get("PREFECT_API_URL"):
+        return True
+    cwd = Path.cwd()
+    dotenv = cwd / ".env"
+    if dotenv.is_file() and "PREFECT_API_URL" in dotenv.read_text(errors="replace"):
+        return True
+    for name, section in (("prefect.toml", ()), ("pyproject.toml", ("tool", "prefect"))):
+        try:
+            data: Any = tomllib.loads((cwd / name).read_text())
+        except (OSError, tomllib.TOMLDecodeError):
+            continue
+        for key in section:
+            data = data.get(key, {}) if isinstance(data, dict) else {}
+        if isinstance(data, dict) and isinstance(data.get("api"), dict) and data["api"].get("url"):
+            return True
+    return False
+
+
+def launch() -> LocalServer | None:
+    """Start the temporary server now and point ``PREFECT_API_URL`` at it, unless an API is configured.
+
+    Call it before Prefect is imported: Prefect snapshots its settings at import, and threads
+    without a settings context (its process pool's message forwarder, for one) read that
+    snapshot; a URL set later would leave them starting a temporary server of their own.
+    """
+    global _launched  # noqa: PLW0603 - one temporary server per process
+    if _launched is None and not api_configured():
+        _launched = LocalServer()
+        os.environ["PREFECT_API_URL"] = _launched.api_url
+    return _launched
+
+
+def take_launched() -> LocalServer | None:
+    """The server :func:`launch` started, handed over to its one user (who stops it)."""
+    global _launched
+    server, _launched = _launched, None
+    return server

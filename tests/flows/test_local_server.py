@@ -1,0 +1,69 @@
+"""The temporary Prefect server the CLI launches before its imports."""
+
+from __future__ import annotations
+
+import urllib.error
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from flows.local_server import LocalServer, api_configured
+
+
+@pytest.fixture
+def no_prefect_config(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    for name in ("PREFECT_API_URL", "PREFECT_PROFILE", "PREFECT_PROFILES_PATH"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("PREFECT_HOME", str(tmp_path / "home"))
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def test_no_api_anywhere_means_a_temporary_server(no_prefect_config: Path) -> None:
+    assert not api_configured()
+
+
+def test_an_api_in_the_environment_is_used(no_prefect_config: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("PREFECT_API_URL", "http://prefect.example:4200/api")
+    assert api_configured()
+
+
+def test_an_api_in_the_active_profile_is_used(
+    no_prefect_config: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    home = no_prefect_config / "home"
+    home.mkdir()
+    (home / "profiles.toml").write_text(
+        'active = "fleet"\n[profiles.fleet]\nPREFECT_API_URL = "http://prefect.example:4200/api"\n'
+        '[profiles.local]\nPREFECT_LOGGING_LEVEL = "INFO"\n'
+    )
+    assert api_configured()
+    monkeypatch.setenv("PREFECT_PROFILE", "local")
+    assert not api_configured()
+
+
+@pytest.mark.parametrize(
+    ("name", "text"),
+    [
+        ("prefect.toml", '[api]\nurl = "http://prefect.example:4200/api"\n'),
+        ("pyproject.toml", '[tool.prefect.api]\nurl = "http://prefect.example:4200/api"\n'),
+        (".env", "PREFECT_API_URL=http://prefect.example:4200/api\n"),
+    ],
+)
+def test_an_api_in_project_settings_is_used(no_prefect_config: Path, name: str, text: str) -> None:
+    (no_prefect_config / name).write_text(text)
+    assert api_configured()
+
+
+@pytest.mark.slow
+def test_the_server_answers_then_stops() -> None:
+    server = LocalServer()
+    try:
+        server.wait_ready(120)
+        with urllib.request.urlopen(f"{server.api_url}/health", timeout=5) as response:
+            assert response.status == 200
+    finally:
+        server.stop()
+    with pytest.raises(urllib.error.URLError):
+        urllib.request.urlopen(f"{server.api_url}/health", timeout=2)

@@ -69,7 +69,7 @@ class StreamingEncoder:
                 f"{self._path}: frame {self._frames} is {rgb.dtype}{list(rgb.shape)}, the clip is uint8"
                 f"{list(self._shape)}. Fix: set 'image: {{resize: [h, w]}}' so every frame has one size."
             )
-        frame = av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+        frame = _video_frame(rgb)
         frame.pts = self._frames
         frame.time_base = Fraction(1, self._fps)
         try:
@@ -111,6 +111,23 @@ class StreamingEncoder:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
+
+
+def _video_frame(rgb: npt.NDArray[np.uint8]) -> av.VideoFrame:
+    """``rgb`` as a PyAV ``rgb24`` frame.
+
+    A ``bgr8`` image arrives as a channel-reversed view of its BGR bytes (see
+    :func:`bagport.decode.decode_image`); swscale swaps the channels of those bytes exactly in
+    0.3 ms per 640x480 frame, where numpy's strided copy took 2 ms (a sixth of an episode).
+    The encoder still gets ``rgb24``: feeding it ``bgr24`` directly is as fast but swscale's
+    BGR-to-YUV path rounds worse (p99 error 5 levels instead of 2 here).
+    """
+    if rgb.strides[2] < 0:
+        bgr = rgb[:, :, ::-1]
+        if bgr.flags.c_contiguous:
+            frame: av.VideoFrame = av.VideoFrame.from_ndarray(bgr, format="bgr24").reformat(format="rgb24")
+            return frame
+    return av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
 
 
 def _stream_codec_name(path: Path) -> str:

@@ -94,3 +94,21 @@ def test_lerobot_default_options() -> None:
     assert EncoderSettings().codec_options() == {"g": "2", "crf": "30", "preset": "12"}
     assert EncoderSettings(threads=2).codec_options()["svtav1-params"] == "lp=2"
     assert EncoderSettings().to_info()["video.crf"] == 30
+
+
+def test_bgr_views_encode_like_their_rgb_copy(tmp_path: Path) -> None:
+    """A bgr8 image reaches the encoder as a channel-reversed view (no copy); colours stay right."""
+    clips = {}
+    for name in ("view", "copy"):
+        with StreamingEncoder(tmp_path / f"{name}.mp4", fps=30, width=48, height=32, settings=FAST) as enc:
+            for k in range(4):
+                bgr = np.ascontiguousarray(_frame(k)[:, :, ::-1])  # the bytes a bgr8 message carries
+                view = bgr[:, :, ::-1]
+                assert view.strides[2] < 0
+                enc.write(view if name == "view" else np.ascontiguousarray(view))
+        clips[name] = [rgb for _, rgb in iter_frames(tmp_path / f"{name}.mp4")]
+    assert len(clips["view"]) == 4
+    for ours, reference in zip(clips["view"], clips["copy"], strict=True):
+        assert np.array_equal(ours, reference)
+    centres = clips["view"][0][20, [8, 24, 40]].astype(int)
+    assert np.abs(centres - np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]])).max() < 12

@@ -35,15 +35,21 @@ BENCH = Path(__file__).resolve().parent
 REPO = BENCH.parent
 START, END = "<!-- results:start -->", "<!-- results:end -->"
 TOOLS = ("bagport", "lerobot", "lerobot-streaming", "floor")
+EXTRA_TOOLS = ("bagport-dask1", "bagport-dask2")
+"""Not run by default: bagport on a local Dask cluster of 1 or 2 worker processes (scaling)."""
+BASELINES = ("lerobot", "lerobot-streaming")
 
 
 def _command(tool: str, workload: Path, out: Path) -> list[str]:
     python = sys.executable
-    if tool == "bagport":
-        return [
+    if tool.startswith("bagport"):
+        command = [
             str(Path(python).with_name("bagport")), "convert", "--manifest", str(workload / "manifest.yaml"),
             "--contract", str(workload / "contract.yaml"), "--output", str(out), "--quiet",
         ]  # fmt: skip
+        if tool.startswith("bagport-dask"):
+            command += ["--runner", "dask", "--workers", tool.removeprefix("bagport-dask")]
+        return command
     if tool == "lerobot":
         return [python, str(BENCH / "baseline_lerobot.py"), str(workload), str(out)]
     if tool == "lerobot-streaming":
@@ -58,12 +64,12 @@ def measure(command: list[str], out: Path) -> dict[str, float]:
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
     proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    peak = 0
+    peak, peak_process = 0, 0
     while proc.poll() is None:
         try:
-            tree = [proc, *proc.children(recursive=True)]
-            peak = max(peak, sum(p.memory_info().rss for p in tree if p.is_running()))
-        except psutil.Error:
+            rss = [p.memory_info().rss for p in [proc, *proc.children(recursive=True)] if p.is_running()]
+            peak, peak_process = max(peak, sum(rss)), max(peak_process, *rss)
+        except (psutil.Error, ValueError):
             pass
         time.sleep(0.2)
     wall = time.perf_counter() - started
@@ -73,7 +79,13 @@ def measure(command: list[str], out: Path) -> dict[str, float]:
         raise RuntimeError(f"{command[:3]} failed ({proc.returncode}):\n{stderr[-3000:]}")
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.exists() else 0
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {"wall_s": wall, "cpu_s": cpu, "peak_rss_mb": peak / 2**20, "output_mb": size / 1e6}
+    return {
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "peak_rss_mb": peak / 2**20,
+        "peak_process_rss_mb": peak_process / 2**20,
+        "output_mb": size / 1e6,
+    }
 
 
 def _machine() -> dict[str, Any]:
@@ -103,17 +115,20 @@ def _table(results: dict[str, Any]) -> str:
              f"runs per cell: {results['runs']}, scale {results['scale']}.", ""]  # fmt: skip
     for name, workload in results["workloads"].items():
         lines += [f"**{name}** ({workload['description']}; {workload['recorded_s']:.0f} s recorded)", ""]
-        lines += ["| tool | wall s | recorded s / wall s | CPU s | peak RSS MB | output MB | bagport / this |",
-                  "|---|---|---|---|---|---|---|"]  # fmt: skip
+        lines += ["| tool | runs | wall s | recorded s / wall s | CPU s | peak RSS MB (tree) | largest process MB | output MB | bagport vs this |",
+                  "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
         tools = workload["tools"]
         ours = tools.get("bagport", {}).get("wall_s")
         for tool, m in tools.items():
-            ratio = f"{m['wall_s'] / ours:.2f}x faster" if ours and tool != "bagport" else ""
+            ratio = (
+                f"bagport {m['wall_s'] / ours:.2f}x faster" if ours and not tool.startswith("bagport") else ""
+            )
             if ours and tool == "floor":
                 ratio = f"bagport takes {ours / m['wall_s']:.2f}x the floor"
             lines.append(
-                f"| {tool} | {m['wall_s']:.1f} | {workload['recorded_s'] / m['wall_s']:.2f} | {m['cpu_s']:.1f} | "
-                f"{m['peak_rss_mb']:.0f} | {m['output_mb']:.1f} | {ratio} |"
+                f"| {tool} | {m['runs']} | {m['wall_s']:.1f} | {workload['recorded_s'] / m['wall_s']:.2f} | "
+                f"{m['cpu_s']:.1f} | {m['peak_rss_mb']:.0f} | {m['peak_process_rss_mb']:.0f} | "
+                f"{m['output_mb']:.1f} | {ratio} |"
             )
         lines.append("")
     return "\n".join(lines)
@@ -136,6 +151,9 @@ def main() -> None:
     parser.add_argument("--workloads", default="W1,W2,W3")
     parser.add_argument("--tools", default=",".join(TOOLS))
     parser.add_argument("--runs", type=int, default=3)
+    parser.add_argument(
+        "--baseline-runs", type=int, default=None, help="runs of the LeRobot baselines (default: --runs)"
+    )
     parser.add_argument("--scale", type=float, default=1.0)
     parser.add_argument("--data", type=Path, default=BENCH / ".data")
     parser.add_argument("--report", type=Path, default=REPO / "BENCHMARKS.md")
@@ -156,9 +174,10 @@ def main() -> None:
         folder = ensure_workload(workload, args.data)
         cells: dict[str, Any] = {}
         for tool in tools:
-            runs = [measure(_command(tool, folder, args.data / "out" / f"{name}-{tool}"), args.data / "out" / f"{name}-{tool}")
-                    for _ in range(args.runs)]  # fmt: skip
-            cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]}
+            count = args.baseline_runs if tool in BASELINES and args.baseline_runs else args.runs
+            out = args.data / "out" / f"{name}-{tool}"
+            runs = [measure(_command(tool, folder, out), out) for _ in range(count)]
+            cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]} | {"runs": count}
             print(f"{name} {tool}: {cells[tool]}", file=sys.stderr, flush=True)
         results["workloads"][name] = {
             "description": workload.description,

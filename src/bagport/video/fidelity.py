@@ -7,7 +7,7 @@ decodes the clip and compares it frame by frame.
 
 Wiring (one recorder per clip)::
 
-    recorder = FidelityRecorder(tmp_dir / "front.refs", height=h, width=w, sample_every=1)
+    recorder = FidelityRecorder(tmp_dir / "front.refs", height=h, width=w, sample_every=4, run=g)
     with StreamingEncoder(clip, fps=fps, width=w, height=h, settings=settings) as encoder:
         for rgb in frames:
             encoder.write(rgb)
@@ -30,8 +30,8 @@ Comparison, per sampled frame (errors in 8-bit levels, on block means):
   spread over the frame and lifts the median with it; a stale or foreign block stands out.
 - copy: the decoded frame is ``copy_ratio`` times closer to one of the previous
   ``copy_lookback`` sampled source frames than to its own source (and its own error exceeds
-  ``copy_floor_levels``). With ``sample_every > 1`` the previous sampled frames are
-  ``sample_every`` frames apart, so only copies of those are recognised.
+  ``copy_floor_levels``). With sampling, only copies of earlier *sampled* frames are
+  recognised (within a sampled run of a GOP, the previous frame is one of them).
 
 A frame is damaged when it has ``>= min_damaged_blocks`` damaged blocks or is a copy. The
 worst frame is the damaged frame with the most damaged blocks (then the lowest PSNR), or the
@@ -39,8 +39,11 @@ lowest-PSNR frame when none is damaged; :class:`FramePair` keeps that one decode
 the block mosaics) for display. ``damaged_frame_indices`` lists at most ``max_listed_frames``
 (50); ``per_frame=True`` adds per-sampled-frame PSNR and damaged-block counts.
 
-Frame count and timestamps (decoded frame ``i`` at ``i / fps`` s exactly, in the stream's
-time base) are checked and reported, never raised: a mismatch is a QA finding, and so is a
+Sampling (``sample_every`` > 1) checks every ``sample_every``-th run of ``run`` frames (a GOP)
+and decodes only those runs, so the cost follows the sampled share. Frames are indexed in
+presentation order (the rank of their pts). ``frames_decoded`` counts the frames in the clip
+(every packet, decoded or skipped). Frame count and timestamps (frame ``i`` at ``i / fps`` s
+exactly, in the stream's time base) are checked for every frame and reported, never raised: a mismatch is a QA finding, and so is a
 decode error mid-clip (``decode_error``). Only an unreadable clip or a clip of another frame
 size raises :class:`VideoError`.
 """
@@ -57,7 +60,7 @@ import numpy.typing as npt
 
 from bagport.errors import VideoError
 from bagport.video.blockmeans import BlockGrid
-from bagport.video.fidelity_compare import FidelityParams, FramePair, compare_frames
+from bagport.video.fidelity_compare import FidelityParams, FramePair, compare_frames, sampled_slot
 
 __all__ = ["ClipFidelity", "FidelityParams", "FidelityRecorder", "FramePair", "compare_clip"]
 
@@ -75,6 +78,7 @@ class ClipFidelity:
     decode_error: str | None
     sampled_frames: int
     sample_every: int
+    sample_run: int
     block: int
     psnr_min_db: float | None
     psnr_median_db: float | None
@@ -106,15 +110,25 @@ class ClipFidelity:
 class FidelityRecorder:
     """Block-mean references of the frames fed to an encoder, appended to a file on local disk.
 
-    ``record`` every frame given to the encoder, in order; every ``sample_every``-th frame
-    (0, n, 2n, ...) is reduced and written. Memory stays flat whatever the episode length.
+    ``record`` every frame given to the encoder, in order. Frames are sampled in runs of
+    ``run`` consecutive frames (pass the encoder's GOP size ``g``), every ``sample_every``-th
+    run (see :func:`~bagport.video.fidelity_compare.sampled_slot`); ``sample_every=1`` keeps
+    every frame. Memory stays flat whatever the episode length.
     """
 
     def __init__(
-        self, path_for_refs: str | Path, *, height: int, width: int, block: int = 8, sample_every: int = 1
+        self,
+        path_for_refs: str | Path,
+        *,
+        height: int,
+        width: int,
+        block: int = 8,
+        sample_every: int = 1,
+        run: int = 1,
     ) -> None:
-        if sample_every < 1:
-            raise VideoError(f"{path_for_refs}: sample_every={sample_every} must be >= 1")
+        if sample_every < 1 or run < 1:
+            raise VideoError(f"{path_for_refs}: sample_every={sample_every} and run={run} must be >= 1")
+        self.run = run
         self.grid = BlockGrid(height=height, width=width, block=block)
         self.path = Path(path_for_refs)
         self.sample_every = sample_every
@@ -143,7 +157,7 @@ class FidelityRecorder:
                 f"{self.path}: frame {self.frames_recorded} is {rgb.dtype}{list(rgb.shape)}, the recorder "
                 f"expects uint8{list(self._shape)} (the frames given to the encoder)"
             )
-        if self.frames_recorded % self.sample_every == 0:
+        if sampled_slot(self.frames_recorded, self.sample_every, self.run) is not None:
             self.grid.means(rgb).astype(_REF_DTYPE).tofile(self._file)
             self.sampled_frames += 1
         self.frames_recorded += 1
@@ -188,7 +202,7 @@ def compare_clip(
     """
     params = params or FidelityParams()
     scores = compare_frames(
-        mp4_path, recorder.references(), recorder.grid, recorder.sample_every, fps, params
+        mp4_path, recorder.references(), recorder.grid, (recorder.sample_every, recorder.run), fps, params
     )
     psnrs = np.asarray(scores.psnr_db, np.float64)
     damaged = [int(i) for i in scores.frame_index[scores.damaged]]
@@ -201,6 +215,7 @@ def compare_clip(
         decode_error=scores.decode_error,
         sampled_frames=len(psnrs),
         sample_every=recorder.sample_every,
+        sample_run=recorder.run,
         block=recorder.grid.block,
         psnr_min_db=round(float(psnrs.min()), 2) if len(psnrs) else None,
         psnr_median_db=round(float(np.median(psnrs)), 2) if len(psnrs) else None,

@@ -16,7 +16,7 @@ import numpy.typing as npt
 from bagport.errors import VideoError
 from bagport.video.blockmeans import BlockGrid
 
-__all__ = ["FidelityParams", "FramePair", "FrameScores", "compare_frames"]
+__all__ = ["FidelityParams", "FramePair", "FrameScores", "compare_frames", "sampled_slot"]
 
 _RED = np.array([255, 0, 0], np.uint8)
 
@@ -93,12 +93,13 @@ class FrameScores:
     decode_error: str | None = None
     worst: FramePair | None = None
 
-    def trim(self, count: int) -> None:
-        self.frame_index = self.frame_index[:count]
-        self.psnr_db = self.psnr_db[:count]
-        self.damaged_blocks = self.damaged_blocks[:count]
-        self.copy_of = self.copy_of[:count]
-        self.damaged = self.damaged[:count]
+    def keep(self, scored: npt.NDArray[np.bool_]) -> None:
+        """Drop the slots no decoded frame filled (a shorter or broken clip)."""
+        self.frame_index = self.frame_index[scored]
+        self.psnr_db = self.psnr_db[scored]
+        self.damaged_blocks = self.damaged_blocks[scored]
+        self.copy_of = self.copy_of[scored]
+        self.damaged = self.damaged[scored]
 
 
 @dataclass(slots=True)
@@ -114,15 +115,34 @@ class _Worst:
     mask: npt.NDArray[np.bool_] | None = None
 
 
+def sampled_slot(n: int, sample_every: int, run: int) -> int | None:
+    """Where frame ``n``'s reference is among the sampled ones, or ``None`` when not sampled.
+
+    Frames are sampled in runs of ``run`` consecutive frames (a GOP: ``g`` of the encoder),
+    every ``sample_every``-th run: so a sampled run starts at a key frame and the clip can be
+    checked by decoding only the sampled runs, and inter frames are checked as often as key
+    frames (with ``g=2``, sampling single frames 0, 4, 8, ... would only ever see key frames).
+    """
+    group, offset = divmod(n, run)
+    if group % sample_every:
+        return None
+    return (group // sample_every) * run + offset
+
+
 def compare_frames(
     mp4_path: str | Path,
     refs: npt.NDArray[np.float16],
     grid: BlockGrid,
-    sample_every: int,
+    sampling: tuple[int, int],
     fps: int | None,
     params: FidelityParams,
 ) -> FrameScores:
-    """Decode every frame of ``mp4_path``; score frames ``0, n, 2n, ...`` against ``refs``."""
+    """Score the sampled frames of ``mp4_path`` against ``refs``; ``sampling`` is ``(sample_every, run)``.
+
+    Frames are indexed in presentation order (the rank of their pts). Only the packets from
+    the key frame before a sampled frame on are decoded, so the cost follows the sampled share.
+    """
+    sample_every, run = sampling
     size = len(refs)
     scores = FrameScores(
         frame_index=np.zeros(size, np.int64),
@@ -131,46 +151,69 @@ def compare_frames(
         copy_of=np.full(size, -1, np.int64),
         damaged=np.zeros(size, np.bool_),
     )
+    scored = np.zeros(size, np.bool_)
     worst = _Worst()
     recent: deque[tuple[int, npt.NDArray[np.float32]]] = deque(maxlen=max(params.copy_lookback, 0))
-    done = 0
     container = _open(mp4_path, grid)
     try:
         stream = container.streams.video[0]
-        period_s = _frame_period_s(stream, fps)
-        time_base = Fraction(stream.time_base) if stream.time_base else None
-        for n, frame in enumerate(container.decode(stream)):
-            scores.frames_decoded = n + 1
-            if scores.first_bad_pts_frame is None and (
-                frame.pts is None or time_base is None or frame.pts * time_base != n * period_s
-            ):
-                scores.first_bad_pts_frame = n
-            sample, offset = divmod(n, sample_every)
-            if offset or sample >= size:
-                continue
-            rgb = frame.to_ndarray(format="rgb24")
-            decoded = grid.means(rgb)
-            reference = refs[sample].astype(np.float32)
-            psnr, mask, copy_of = _score(decoded, reference, recent, params)
-            recent.append((n, reference))
-            blocks = int(mask.sum())
-            is_damaged = blocks >= params.min_damaged_blocks or copy_of is not None
-            scores.frame_index[sample] = n
-            scores.psnr_db[sample] = psnr
-            scores.damaged_blocks[sample] = blocks
-            scores.copy_of[sample] = -1 if copy_of is None else copy_of
-            scores.damaged[sample] = is_damaged
-            done = sample + 1
-            key = (is_damaged, blocks, -psnr)
-            if key > worst.key:
-                worst = _Worst(key, n, psnr, blocks, copy_of, rgb, decoded, reference, mask)
+        rank = _presentation_ranks(container, stream, fps, scores)
+        container.seek(0)
+        unfed: list[Any] = []
+        live = False  # the decoder has this GOP's key frame
+        packets = (p for p in container.demux(stream) if p.pts is not None and p.size)
+        for packet in [*packets, None]:
+            if packet is not None:
+                if packet.is_keyframe:
+                    unfed, live = [], False
+                unfed.append(packet)
+                if not live and sampled_slot(rank.get(packet.pts, -1), sample_every, run) is None:
+                    continue
+                batch, unfed, live = unfed, [], True
+            else:
+                batch = [None]  # flush the decoder
+            for item in batch:
+                for frame in stream.codec_context.decode(item):
+                    n = rank.get(frame.pts, -1)
+                    slot = sampled_slot(n, sample_every, run) if n >= 0 else None
+                    if slot is None or slot >= size or scored[slot]:
+                        continue
+                    rgb = frame.to_ndarray(format="rgb24")
+                    decoded = grid.means(rgb)
+                    reference = refs[slot].astype(np.float32)
+                    psnr, mask, copy_of = _score(decoded, reference, recent, params)
+                    recent.append((n, reference))
+                    blocks = int(mask.sum())
+                    is_damaged = blocks >= params.min_damaged_blocks or copy_of is not None
+                    scores.frame_index[slot] = n
+                    scores.psnr_db[slot] = psnr
+                    scores.damaged_blocks[slot] = blocks
+                    scores.copy_of[slot] = -1 if copy_of is None else copy_of
+                    scores.damaged[slot] = is_damaged
+                    scored[slot] = True
+                    key = (is_damaged, blocks, -psnr)
+                    if key > worst.key:
+                        worst = _Worst(key, n, psnr, blocks, copy_of, rgb, decoded, reference, mask)
     except av.error.FFmpegError as err:
-        scores.decode_error = f"decoding stopped after frame {scores.frames_decoded}: {err}"
+        scores.decode_error = f"decoding stopped: {err}"
     finally:
         container.close()
-    scores.trim(done)
+    scores.keep(scored)
     scores.worst = _frame_pair(worst, grid)
     return scores
+
+
+def _presentation_ranks(container: Any, stream: Any, fps: int | None, scores: FrameScores) -> dict[int, int]:
+    """Demux only (no decoding): every frame's pts, its rank, the frame count and the pts check."""
+    period_s = _frame_period_s(stream, fps)
+    time_base = Fraction(stream.time_base) if stream.time_base else None
+    stamps = sorted(p.pts for p in container.demux(stream) if p.pts is not None and p.size)
+    scores.frames_decoded = len(stamps)
+    for n, pts in enumerate(stamps):
+        if time_base is None or pts * time_base != n * period_s:
+            scores.first_bad_pts_frame = n
+            break
+    return {pts: n for n, pts in enumerate(stamps)}
 
 
 def _open(mp4_path: str | Path, grid: BlockGrid) -> Any:

@@ -292,3 +292,22 @@ def test_archival_preset_is_near_lossless_and_loads_in_lerobot(tmp_path: Path) -
     loaded = decode_video_frames(clip, [0.0, 7 / 30], tolerance_s=1e-4, backend="pyav")
     rgb = (loaded[1].permute(1, 2, 0).numpy() * 255).round().astype(int)
     assert np.abs(rgb - source[7]).max() <= 2
+
+
+def test_sampling_in_gop_runs_checks_inter_frames_and_decodes_only_those_runs(tmp_path: Path) -> None:
+    gop2 = EncoderSettings.from_dict({"codec": "libx264", "crf": 0, "pix_fmt": "yuv444p", "g": 2})
+    source = [squares(k) for k in range(N)]
+    encoded = list(source)
+    _grey_block(encoded, 9)  # an inter frame of a sampled run (runs 0-1, 8-9, 16-17)
+    _grey_block(encoded, 5)  # not sampled
+    h, w = source[0].shape[:2]
+    recorder = FidelityRecorder(tmp_path / "r.refs", height=h, width=w, sample_every=4, run=2)
+    with StreamingEncoder(tmp_path / "c.mp4", fps=30, width=w, height=h, settings=gop2) as encoder:
+        for original, fed in zip(source, encoded, strict=True):
+            encoder.write(fed)
+            recorder.record(original)
+    result = compare_clip(tmp_path / "c.mp4", recorder, fps=30, params=FidelityParams(per_frame=True))
+    assert (result.sampled_frames, result.sample_every, result.sample_run) == (6, 4, 2)
+    assert (result.frames_expected, result.frames_decoded, result.pts_ok) == (N, N, True)
+    assert result.damaged_frame_indices == (9,)
+    assert result.damaged_blocks_per_frame == (0, 0, 0, 1, 0, 0)

@@ -47,7 +47,7 @@ class Progress:
 
 
 def qa_table(report: DatasetReport) -> list[dict[str, Any]]:
-    """One row per bag: where it went, QA score and verdict, and why."""
+    """One row per bag: where it went, QA score and verdict, video fidelity, and why."""
     return [
         {
             "bag": str(row["bag_uri"]).rstrip("/").rsplit("/", 1)[-1],
@@ -55,6 +55,8 @@ def qa_table(report: DatasetReport) -> list[dict[str, Any]]:
             "score": row["score"],
             "verdict": row["verdict"],
             "frames": row["frames"],
+            "video PSNR min (dB)": row.get("video_psnr_min_db"),
+            "video damaged frames": row.get("video_damaged_frames"),
             "reason": row["reason"],
         }
         for row in report.qa

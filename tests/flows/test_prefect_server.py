@@ -127,5 +127,6 @@ def test_conversion_is_visible_through_the_prefect_api(
     assert "episode_000" in qa_table
     assert "episode_001" in qa_table
     assert "verdict" in qa_table
+    assert "video PSNR min (dB)" in qa_table
     assert "episodes kept: **2**" in str(artifacts["bagport-summary"])
     assert float(str(artifacts["bagport-progress"])) == pytest.approx(100.0)

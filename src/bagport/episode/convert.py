@@ -19,6 +19,7 @@ from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
 from bagport.episode.checks import bag_fingerprint, check_bag_fits
+from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.sinks import FrameTableWriter, write_provenance
@@ -52,6 +53,7 @@ class _EpisodeSinks:
     settings: EncoderSettings
     frame_tasks: list[str]
     monitor: ValueMonitor
+    fidelity: EpisodeFidelity
 
     def __post_init__(self) -> None:
         vector_dtypes = {f.key: f.dtype for f in self.plan.features if f.kind is FeatureKind.VECTOR}
@@ -75,6 +77,7 @@ class _EpisodeSinks:
                 self.encoders[key] = encoder
                 self.image_stats[key] = ImageStatsAccumulator()
             encoder.write(rgb)
+            self.fidelity.record(key, rgb)
             self.image_stats[key].update(rgb)
             self.monitor.add_image(frame.index, key, rgb)
         for key, vec in frame.vectors.items():
@@ -116,19 +119,23 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         try:
             qa_config = QAConfig.model_validate(request.qa)
             monitor = ValueMonitor(qa_config.values, plan.fps, int(ticks.size))
-            sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks, monitor)
+            fidelity = EpisodeFidelity(qa_config.video, workdir / "fidelity-refs", settings.g or 1)
+            sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks, monitor, fidelity)
             try:
                 assemble_frames(reader, request.bag_uri, plan.features, sources, ticks, sinks.on_frame)
             finally:
                 clips = sinks.close()
+            video_checks, video_plots = fidelity.check(clips, plan.fps)  # before publishing: refs are scratch
             write_provenance(workdir / PROVENANCE_FILE, sources, ticks)
             extra = [
                 *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
                 task_check(qa_config, frame_tasks),
+                *video_checks,
             ]
             qa = assess_episode(
-                request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps
-            )
+                request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,
+                extra_plots={"fidelity": video_plots} if video_plots else {},
+            )  # fmt: skip
             (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
             features = _staged_features(plan, sources, sinks, clips, settings)
             stats: dict[str, Any] = {}

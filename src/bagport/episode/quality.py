@@ -7,6 +7,7 @@ the frames as they stream (a :class:`~bagport.qa.ValueMonitor` in the frame call
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
@@ -101,6 +102,7 @@ def assess_episode(
     monitor: ValueMonitor,
     extra: Sequence[CheckResult],
     fps: int,
+    extra_plots: dict[str, Any] | None = None,
 ) -> EpisodeQA:
     start_ns, end_ns = int(ticks_ns[0]), int(ticks_ns[-1])
     checks, plots = stream_checks(_streams(timeline, sources), start_ns, end_ns, config)
@@ -114,5 +116,11 @@ def assess_episode(
         checks,
         duration_s=duration_s,
         frames=int(ticks_ns.size),
-        plots={**plots, **sync_plots, **monitor.plots(), "window_ns": [start_ns, end_ns]},
+        plots={
+            **plots,
+            **sync_plots,
+            **monitor.plots(),
+            "window_ns": [start_ns, end_ns],
+            **(extra_plots or {}),
+        },
     )

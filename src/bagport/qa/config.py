@@ -10,7 +10,7 @@ from typing import Literal
 
 import pydantic
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, PositiveFloat
+from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
 
 from bagport.errors import ContractError
 from bagport.yamlsource import explain_validation, load_yaml
@@ -108,6 +108,25 @@ class ContentQA(_Strict):
     """1 when no frame has a task prompt."""
 
 
+class VideoQA(_Strict):
+    """Every encoded clip decoded again and compared with the frames fed to the encoder
+    (:mod:`bagport.video.fidelity`); errors are measured on ``block_px`` block means."""
+
+    fidelity: bool = True
+    """Off: no check, no cost (the video checks are left out)."""
+    sample_every: PositiveInt = 4
+    """Check every n-th run of ``g`` frames (a GOP; only those are decoded); 1 checks every frame."""
+    block_px: PositiveInt = 8
+    frame_mismatch: Gate = Field(default_factory=lambda: _gate(None, 1.0))
+    """Frames missing or extra in the clip, timestamps off the fps grid, decoding errors (count)."""
+    psnr_min_db: Gate = Field(default_factory=lambda: _gate(30.0, 20.0))
+    """Lower is worse: the worst checked frame's PSNR against its source (dB, block means)."""
+    damaged_frames: Gate = Field(default_factory=lambda: _gate(1.0, None, hard=False))
+    """Checked frames with blocks far worse than the rest of the frame (stale or foreign blocks)."""
+    copied_frames: Gate = Field(default_factory=lambda: _gate(None, 1.0))
+    """Frames that decode as a copy of an earlier frame (they show the wrong moment)."""
+
+
 class QAConfig(_Strict):
     on_fail: Literal["exclude", "keep", "fail_run"] = "exclude"
     """An episode failing a hard check (or a bag that cannot be converted) is left out of the
@@ -119,6 +138,7 @@ class QAConfig(_Strict):
     values: ValuesQA = Field(default_factory=ValuesQA)
     safety: SafetyQA = Field(default_factory=SafetyQA)
     content: ContentQA = Field(default_factory=ContentQA)
+    video: VideoQA = Field(default_factory=VideoQA)
 
 
 def load_qa_config(text: str | None, name: str = "qa.yaml") -> QAConfig:

@@ -2,7 +2,8 @@
 
 One table of episodes (score, verdict, what failed), then per episode its checks and
 plots: message rate per topic over time with the longest gaps, alignment error
-histograms, numeric feature traces and camera brightness.
+histograms, numeric feature traces and camera brightness, and per camera how the encoded
+clip matches its source (with the worst frame beside its source when a video check failed).
 """
 
 from __future__ import annotations
@@ -120,6 +121,31 @@ def _episode_plots(plots: dict[str, Any], duration_s: float) -> str:
     return f'<div class="plots">{"".join(parts)}</div>{gap_list}'
 
 
+def _fidelity(clips: dict[str, Any]) -> str:
+    """Per camera: how the encoded clip matches its source, and the worst frame when a check failed."""
+    if not clips:
+        return ""
+    rows, pictures = [], []
+    for key, c in clips.items():
+        rows.append(
+            f"<tr><td>{escape(key)}</td><td>{c['frames_decoded']} / {c['frames_expected']}</td>"
+            f"<td>{c['sampled_frames']}</td><td>{c['psnr_min_db']}</td><td>{c['psnr_median_db']}</td>"
+            f"<td>{c['damaged_frames']}</td><td>{c['copied_frames']}</td><td>{c['worst_frame_index']}</td></tr>"
+        )
+        if c.get("worst_jpeg_base64"):
+            pictures.append(
+                f'<figure><img alt="worst frame of {escape(key)}" src="data:image/jpeg;base64,'
+                f'{c["worst_jpeg_base64"]}"><figcaption class="small">{escape(key)}, frame '
+                f"{c['worst_frame_index']} ({c['worst_psnr_db']} dB): source | encoded clip (both as "
+                f"{c['block']} px block means) | encoded clip, damaged blocks outlined in red</figcaption></figure>"
+            )
+    return (
+        "<table><tr><th>camera</th><th>frames in clip / encoded</th><th>checked</th><th>PSNR min dB</th>"
+        "<th>PSNR median dB</th><th>damaged</th><th>copies</th><th>worst frame</th></tr>"
+        f"{''.join(rows)}</table>{''.join(pictures)}"
+    )
+
+
 def _table(checks: Sequence[CheckResult]) -> str:
     rows = "".join(
         f'<tr><td class="{c.verdict}">{c.verdict}</td><td>{escape(c.check)}</td><td>{escape(c.subject)}</td>'
@@ -160,6 +186,7 @@ def render_report(entries: Sequence[QAEntry], dataset: dict[str, Any]) -> str:
         qa = entry.qa
         body = f"<p class='small'>{escape(qa.error)}</p>" if qa.error else ""
         body += _checks_table(entry) + (_episode_plots(qa.plots, qa.duration_s) if qa.plots else "")
+        body += _fidelity(qa.plots.get("fidelity", {}))
         sections.append(
             f'<details id="ep{n}"{" open" if qa.verdict != "pass" else ""}><summary>'
             f'<span class="{qa.verdict}">{qa.verdict}</span> {escape(qa.bag_uri)} — score {qa.score:.2f}, '

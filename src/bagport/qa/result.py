@@ -122,6 +122,8 @@ class QAEntry:
     excluded_reason: str | None = None
 
     def brief(self) -> dict[str, Any]:
+        clips = self.qa.plots.get("fidelity", {}).values()
+        psnrs = [c["psnr_min_db"] for c in clips if c.get("psnr_min_db") is not None]
         return {
             "bag_uri": self.qa.bag_uri,
             "manifest_entry": self.manifest_entry,
@@ -132,4 +134,6 @@ class QAEntry:
             "reason": self.excluded_reason or self.qa.headline(),
             "duration_s": round(self.qa.duration_s, 3),
             "frames": self.qa.frames,
+            "video_psnr_min_db": min(psnrs) if psnrs else None,
+            "video_damaged_frames": sum(int(c.get("damaged_frames", 0)) for c in clips) if clips else None,
         }

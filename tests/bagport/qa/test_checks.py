@@ -68,7 +68,12 @@ def test_clean_episode_passes_every_check_including_images(tmp_path: Path) -> No
     assert summary.qa["verdict"] == "pass"
     assert _check(qa, "time.output_monotonic", "episode").value == 0
     groups = {c.check.split(".")[0] for c in qa.checks}
-    assert groups == {"coverage", "rates", "time", "values", "content"}
+    assert groups == {"coverage", "rates", "time", "values", "content", "video"}
+    fidelity = qa.plots["fidelity"]
+    assert set(fidelity) == {"observation.images.front", "observation.images.wrist"}
+    for key, clip in fidelity.items():
+        assert clip["frames_ok"] and clip["pts_ok"] and clip["sampled_frames"] > 0, key
+        assert "worst_jpeg_base64" not in clip  # only shown when a video check did not pass
     assert {c.subject for c in qa.checks if c.check == "values.frozen_image_s"} == {
         "observation.images.front",
         "observation.images.wrist",

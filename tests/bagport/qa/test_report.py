@@ -38,7 +38,10 @@ def _entries(tmp_path: Path) -> list[QAEntry]:
             contract_text=SAMPLE_CONTRACT.read_text(),
             contract_name="sample_robot.yaml",
             encoder=FAST_CODEC,
-            qa=QAConfig().model_dump(mode="json"),
+            # the second episode asks for a PSNR no lossy clip reaches, so its worst frame is shown
+            qa=QAConfig.model_validate(
+                {"video": {"psnr_min_db": {"warn": 99.0, "fail": None}, "sample_every": 1}} if index else {}
+            ).model_dump(mode="json"),
         )
         summary = convert_episode(request)
         qa = EpisodeQA.from_dict(json.loads((Path(summary.dir_uri) / "qa.json").read_text()))
@@ -67,6 +70,9 @@ def test_report_is_self_contained_and_lists_every_episode(report_html: Path) -> 
     assert "broken.mcap: not a bag" in html
     assert html.count("<svg") >= 8  # rates, alignment histograms, traces, brightness per episode
     assert "messages per second, by topic" in html
+    assert html.count("frames in clip / encoded") == 2  # video fidelity per converted episode
+    assert html.count('src="data:image/jpeg;base64,') == 2  # both cameras of the warned episode
+    assert "damaged blocks outlined in red" in html
 
 
 def test_report_renders_in_headless_chromium(report_html: Path, tmp_path: Path) -> None:

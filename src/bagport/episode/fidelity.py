@@ -1,0 +1,133 @@
+"""Video fidelity of one episode: a reference recorder per camera while encoding, then QA checks.
+
+The recorders keep block means of the frames given to each encoder in a scratch folder
+(never published to staging); after the clips are closed each clip is decoded again and
+compared (:mod:`bagport.video.fidelity`). The findings become ``video.*`` QA checks, and the
+per-camera numbers (with the worst frame beside its source, when a check did not pass) go
+into the episode's QA plots for the HTML report.
+"""
+
+from __future__ import annotations
+
+import base64
+import shutil
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+import simplejpeg
+from PIL import Image as PILImage
+
+from bagport.qa import CheckResult, judge
+from bagport.qa.config import VideoQA
+from bagport.video import ClipInfo, FidelityParams, FidelityRecorder, compare_clip
+
+__all__ = ["EpisodeFidelity"]
+
+_WORST_IMAGE_WIDTH_PX = 960
+
+
+class EpisodeFidelity:
+    """One episode's recorders (one per camera) and, at the end, its ``video.*`` checks."""
+
+    def __init__(self, config: VideoQA, scratch: Path, gop: int) -> None:
+        self._config = config
+        self._scratch = scratch
+        self._gop = max(1, gop)
+        self._recorders: dict[str, FidelityRecorder] = {}
+
+    def record(self, key: str, rgb: npt.NDArray[np.uint8]) -> None:
+        """The frame just given to ``key``'s encoder (the same array, in the same order)."""
+        if not self._config.fidelity:
+            return
+        recorder = self._recorders.get(key)
+        if recorder is None:
+            self._scratch.mkdir(parents=True, exist_ok=True)
+            recorder = FidelityRecorder(
+                self._scratch / f"{key}.refs",
+                height=rgb.shape[0],
+                width=rgb.shape[1],
+                block=self._config.block_px,
+                sample_every=self._config.sample_every,
+                run=self._gop,
+            )
+            self._recorders[key] = recorder
+        recorder.record(rgb)
+
+    def check(self, clips: dict[str, ClipInfo], fps: int) -> tuple[list[CheckResult], dict[str, Any]]:
+        """Compare every closed clip with its references; returns the checks and the report data."""
+        checks: list[CheckResult] = []
+        plots: dict[str, Any] = {}
+        config = self._config
+        for key, recorder in self._recorders.items():
+            clip = clips[key]
+            result = compare_clip(clip.path, recorder, fps=fps, params=FidelityParams())
+            mismatch = abs(result.frames_expected - result.frames_decoded) + (not result.pts_ok)
+            mismatch += result.decode_error is not None
+            problems = [
+                f"{result.frames_decoded} frames in the clip, {result.frames_expected} encoded"
+                if not result.frames_ok
+                else "",
+                f"timestamp off the grid at frame {result.first_bad_pts_frame}" if not result.pts_ok else "",
+                result.decode_error or "",
+            ]
+            said = (
+                "; ".join(p for p in problems if p)
+                or f"{result.frames_decoded} frames, timestamps on the grid"
+            )
+            share = f"{result.sampled_frames} of {result.frames_expected} frames checked"
+            psnr = result.psnr_min_db if result.psnr_min_db is not None else 0.0
+            where = f" (frame {result.worst_frame_index})" if result.worst_frame_index is not None else ""
+            listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
+            found = [
+                judge("video.frame_mismatch", key, float(mismatch), config.frame_mismatch, said),
+                judge(
+                    "video.psnr_min_db",
+                    key,
+                    psnr,
+                    config.psnr_min_db,
+                    f"worst frame {psnr:.1f} dB{where}, median {result.psnr_median_db} dB; {share}",
+                    lower_is_worse=True,
+                ),
+                judge(
+                    "video.damaged_frames",
+                    key,
+                    float(result.damaged_frames),
+                    config.damaged_frames,
+                    f"{result.damaged_frames} frame(s) with stale or foreign blocks"
+                    + (f" (frames {listed})" if listed else "")
+                    + f"; {share}",
+                ),
+                judge(
+                    "video.copied_frames",
+                    key,
+                    float(result.copied_frames),
+                    config.copied_frames,
+                    f"{result.copied_frames} frame(s) decode as a copy of an earlier frame; {share}",
+                ),
+            ]
+            checks += found
+            entry = result.to_dict()
+            if result.worst is not None and any(c.verdict != "pass" for c in found):
+                entry["worst_jpeg_base64"] = _jpeg_base64(result.worst.side_by_side())
+            plots[key] = entry
+        self.discard()
+        return checks, plots
+
+    def discard(self) -> None:
+        """Delete the reference files (also after a failed episode)."""
+        for recorder in self._recorders.values():
+            recorder.discard()
+        self._recorders.clear()
+        shutil.rmtree(self._scratch, ignore_errors=True)
+
+
+def _jpeg_base64(rgb: npt.NDArray[np.uint8]) -> str:
+    """The worst-frame panel, at most ``_WORST_IMAGE_WIDTH_PX`` wide, as base64 JPEG for the report."""
+    height, width = rgb.shape[:2]
+    if width > _WORST_IMAGE_WIDTH_PX:
+        size = (_WORST_IMAGE_WIDTH_PX, max(1, round(height * _WORST_IMAGE_WIDTH_PX / width)))
+        rgb = np.asarray(PILImage.fromarray(rgb).resize(size, PILImage.Resampling.BILINEAR))
+    jpeg = simplejpeg.encode_jpeg(np.ascontiguousarray(rgb), quality=85, colorspace="RGB")
+    return base64.b64encode(jpeg).decode("ascii")

@@ -7,7 +7,8 @@ and into BENCHMARKS.md between the result markers (the rest of that file is pros
 
 Usage: python bench/run.py [--workloads W1,W2,W3] [--tools bagport,lerobot,lerobot-streaming,floor]
                            [--runs 3] [--scale 1.0] [--data bench/.data] [--report BENCHMARKS.md]
-                           [--results bench/results.json] [--keep-outputs]
+                           [--results bench/results.json] [--keep-other-results]
+                           [--keep-outputs] [--baseline-runs N]
 """
 
 from __future__ import annotations
@@ -112,7 +113,7 @@ def _machine() -> dict[str, Any]:
 def _table(results: dict[str, Any]) -> str:
     lines = [f"Machine: {results['machine']['cores']} cores, {results['machine']['cpu']}, "
              f"{results['machine']['memory_gb']} GB; versions {results['machine']['versions']}; "
-             f"runs per cell: {results['runs']}, scale {results['scale']}.", ""]  # fmt: skip
+             f"scale {results['scale']}; runs per cell in the table.", ""]  # fmt: skip
     for name, workload in results["workloads"].items():
         lines += [f"**{name}** ({workload['description']}; {workload['recorded_s']:.0f} s recorded)", ""]
         lines += ["| tool | runs | wall s | recorded s / wall s | CPU s | peak RSS MB (tree) | largest process MB | output MB | bagport vs this |",
@@ -164,6 +165,10 @@ def main() -> None:
     args = parser.parse_args()
     tools = [t for t in args.tools.split(",") if t]
     results: dict[str, Any] = {"machine": _machine(), "runs": args.runs, "scale": args.scale, "workloads": {}}
+    if args.keep_other_results and args.results.exists():  # add to the workloads measured before
+        before = json.loads(args.results.read_text())
+        if before.get("scale") == args.scale:
+            results["workloads"] = before.get("workloads", {})
     for name in args.workloads.split(","):
         workload = WORKLOADS[name].scaled(args.scale)
         print(

@@ -184,10 +184,11 @@ def main() -> None:
             runs = [measure(_command(tool, folder, out), out) for _ in range(count)]
             cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]} | {"runs": count}
             print(f"{name} {tool}: {cells[tool]}", file=sys.stderr, flush=True)
+        earlier = results["workloads"].get(name, {}).get("tools", {})
         results["workloads"][name] = {
             "description": workload.description,
             "recorded_s": workload.recorded_s,
-            "tools": cells,
+            "tools": {**earlier, **cells},  # tools measured before (--keep-other-results) stay
         }
         args.results.write_text(json.dumps(results, indent=1))
         write_report(results, args.report)

@@ -160,6 +160,11 @@ def main() -> None:
     parser.add_argument("--report", type=Path, default=REPO / "BENCHMARKS.md")
     parser.add_argument("--results", type=Path, default=BENCH / "results.json")
     parser.add_argument(
+        "--keep-other-results",
+        action="store_true",
+        help="keep the results already in --results for workloads and tools not run now",
+    )
+    parser.add_argument(
         "--keep-outputs", action="store_true", help="keep each tool's last output under DATA/out"
     )
     args = parser.parse_args()

@@ -32,7 +32,9 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
 
 def _load_encoder(value: str | None) -> dict[str, Any]:
     if not value:
-        return {}
+        from bagport.video.settings import default_encoder  # noqa: PLC0415 - keep `--help` fast
+
+        return default_encoder()
     path = Path(value)
     if not path.is_file():
         preset = Path(__file__).resolve().parent.parent / "configs" / "codecs" / f"{value}.yaml"
@@ -223,7 +225,11 @@ def _parser() -> argparse.ArgumentParser:
     convert.add_argument(
         "--dask-address", default=None, help="existing Dask scheduler, e.g. tcp://10.0.0.5:8786"
     )
-    convert.add_argument("--codec", default=None, help="encoder preset name in configs/codecs or a YAML file")
+    convert.add_argument(
+        "--codec",
+        default=None,
+        help="encoder preset name in configs/codecs or a YAML file (default: h264-fast; LeRobot's: lerobot-default)",
+    )
     convert.add_argument("--overwrite", action="store_true", help="replace an existing dataset at --output")
     convert.add_argument(
         "--append",

@@ -14,6 +14,7 @@ from prefect import flow
 
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
+from bagport.video.settings import default_encoder
 from flows.convert import run_config
 
 __all__ = ["ingest", "reconvert"]
@@ -37,7 +38,7 @@ def ingest(
         output=output,
         staging=staging,
         qa=qa,
-        encoder=encoder or {},
+        encoder=encoder or default_encoder(),
         workers=workers,
         runner="dask" if dask_address else "process",
         dask_address=dask_address,
@@ -64,7 +65,7 @@ def reconvert(
         output=output,
         overwrite=overwrite,
         qa=qa,
-        encoder=encoder or {},
+        encoder=encoder or default_encoder(),
         workers=workers,
         runner="dask" if dask_address else "process",
         dask_address=dask_address,

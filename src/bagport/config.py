@@ -7,6 +7,8 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt, model_validator
 
+from bagport.video.settings import default_encoder
+
 __all__ = ["ConvertConfig"]
 
 
@@ -38,7 +40,8 @@ class ConvertConfig(BaseModel):
         description="Existing Dask scheduler (tcp://host:port); default: a local cluster of processes.",
     )
     encoder: dict[str, Any] = Field(
-        default_factory=dict, description="Video encoder settings (see configs/codecs)."
+        default_factory=default_encoder,
+        description="Video encoder settings (see configs/codecs); default: H.264 (bagport.video.DEFAULT_ENCODER).",
     )
     chunks_size: PositiveInt = 1000
     data_files_size_in_mb: PositiveFloat = 100

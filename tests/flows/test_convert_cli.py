@@ -118,7 +118,7 @@ def test_layout_stats_and_provenance(converted: tuple[Path, Path]) -> None:
     assert info["codebase_version"] == "v3.0"
     assert info["robot_type"] == "bagport_sample_arm"
     assert info["features"]["observation.state"]["names"] == [f"position.j{i}" for i in range(1, 7)]
-    assert info["features"]["observation.images.front"]["info"]["video.codec"] == "av1"
+    assert info["features"]["observation.images.front"]["info"]["video.codec"] == "h264"  # bagport's default
     assert sorted(p.name for p in (out / "videos/observation.images.front/chunk-000").iterdir()) == [
         "file-000.mp4"
     ]

@@ -5,9 +5,10 @@ from __future__ import annotations
 from bagport.video.encode import ClipInfo, StreamingEncoder
 from bagport.video.fidelity import ClipFidelity, FidelityParams, FidelityRecorder, FramePair, compare_clip
 from bagport.video.remux import ClipPlacement, VideoStreamInfo, concat_clips, iter_frames, probe_video
-from bagport.video.settings import EncoderSettings
+from bagport.video.settings import DEFAULT_ENCODER, EncoderSettings
 
 __all__ = [
+    "DEFAULT_ENCODER",
     "ClipFidelity",
     "ClipInfo",
     "ClipPlacement",

@@ -1,4 +1,5 @@
-"""Encoder settings, defaulting to LeRobot's (libsvtav1, yuv420p, g=2, crf=30, preset=12)."""
+"""Encoder settings. :class:`EncoderSettings` defaults to LeRobot's (libsvtav1, yuv420p, g=2, crf=30,
+preset=12); a conversion's default is :data:`DEFAULT_ENCODER` (H.264), chosen on evidence."""
 
 from __future__ import annotations
 
@@ -8,9 +9,31 @@ from typing import Any
 
 from bagport.errors import VideoError
 
-__all__ = ["EncoderSettings"]
+__all__ = ["DEFAULT_ENCODER", "EncoderSettings", "default_encoder"]
 
 _SVTAV1 = "libsvtav1"
+
+
+DEFAULT_ENCODER: Mapping[str, Any] = {
+    "codec": "libx264",
+    "pix_fmt": "yuv420p",
+    "g": 2,
+    "crf": 23,
+    "preset": "veryfast",
+}
+"""What ``bagport convert`` encodes with unless told otherwise (``configs/codecs/h264-fast.yaml``).
+
+Not LeRobot's default: on the benchmark's camera streams (640x480 JPEG with sensor noise) libsvtav1
+preset 12 crf 30 g 2 encoded 4-19% of frames with whole regions wrong (PSNR 17 dB against the frame
+it was given; both dav1d and libaom decode them the same), and libx264 veryfast crf 23 g 2 none, at
+~35% more encode time and up to 1.8x the file size. BENCHMARKS.md has the study. LeRobot decodes
+H.264; ``--codec lerobot-default`` gives LeRobot's AV1 settings (the fidelity check flags the damage).
+"""
+
+
+def default_encoder() -> dict[str, Any]:
+    """A fresh copy of :data:`DEFAULT_ENCODER`."""
+    return dict(DEFAULT_ENCODER)
 
 
 @dataclass(frozen=True, slots=True)

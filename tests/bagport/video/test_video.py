@@ -112,3 +112,17 @@ def test_bgr_views_encode_like_their_rgb_copy(tmp_path: Path) -> None:
         assert np.array_equal(ours, reference)
     centres = clips["view"][0][20, [8, 24, 40]].astype(int)
     assert np.abs(centres - np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255]])).max() < 12
+
+
+def test_bagport_default_encoder_is_the_h264_fast_preset() -> None:
+    import yaml  # noqa: PLC0415
+
+    from bagport.config import ConvertConfig  # noqa: PLC0415
+    from bagport.video.settings import DEFAULT_ENCODER  # noqa: PLC0415
+    from tests.helpers import REPO  # noqa: PLC0415
+
+    preset = yaml.safe_load((REPO / "configs/codecs/h264-fast.yaml").read_text())
+    assert preset == dict(DEFAULT_ENCODER)
+    config = ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out")
+    assert config.encoder == preset
+    assert EncoderSettings.from_dict(config.encoder).codec == "libx264"

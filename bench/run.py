@@ -36,9 +36,10 @@ BENCH = Path(__file__).resolve().parent
 REPO = BENCH.parent
 START, END = "<!-- results:start -->", "<!-- results:end -->"
 TOOLS = ("bagport", "lerobot", "lerobot-streaming", "floor")
-EXTRA_TOOLS = ("bagport-dask1", "bagport-dask2", "bagport-h264")
-"""Not run by default: bagport on a local Dask cluster of 1 or 2 worker processes (scaling), and
-bagport with its own default codec (H.264) instead of LeRobot's settings."""
+EXTRA_TOOLS = ("bagport-dask1", "bagport-dask2", "bagport-h264", "bagport-nofidelity")
+"""Not run by default: bagport on a local Dask cluster of 1 or 2 worker processes (scaling),
+bagport with its own default codec (H.264) instead of LeRobot's settings, and bagport without the
+video fidelity check (the work the other tools do)."""
 BASELINES = ("lerobot", "lerobot-streaming")
 
 
@@ -49,6 +50,10 @@ def _command(tool: str, workload: Path, out: Path) -> list[str]:
             str(Path(python).with_name("bagport")), "convert", "--manifest", str(workload / "manifest.yaml"),
             "--contract", str(workload / "contract.yaml"), "--output", str(out), "--quiet",
         ]  # fmt: skip
+        if tool == "bagport-nofidelity":  # the same work as the other tools: no video fidelity check
+            qa = workload / "qa-no-fidelity.yaml"
+            qa.write_text("video: {fidelity: false}\n")
+            command += ["--qa", str(qa)]
         if tool != "bagport-h264":
             # LeRobot's codec settings, as the other tools use; every episode kept (AV1 damages some
             # frames of these cameras, which the fidelity check would otherwise exclude)

@@ -26,7 +26,8 @@ DEFAULT_ENCODER: Mapping[str, Any] = {
 Not LeRobot's default: on the benchmark's camera streams (640x480 JPEG with sensor noise) libsvtav1
 preset 12 crf 30 g 2 encoded 4-19% of frames with whole regions wrong (PSNR 17 dB against the frame
 it was given; both dav1d and libaom decode them the same), and libx264 veryfast crf 23 g 2 none, at
-~35% more encode time and up to 1.8x the file size. BENCHMARKS.md has the study. LeRobot decodes
+up to 1.8x the file size (one episode alone encoded ~35% slower; a whole two-worker W1 run was
+24% faster). BENCHMARKS.md has the study. LeRobot decodes
 H.264; ``--codec lerobot-default`` gives LeRobot's AV1 settings (the fidelity check flags the damage).
 """
 

@@ -193,11 +193,19 @@ def main() -> None:
         )
         folder = ensure_workload(workload, args.data)
         cells: dict[str, Any] = {}
-        for tool in tools:
-            count = args.baseline_runs if tool in BASELINES and args.baseline_runs else args.runs
-            out = args.data / "out" / f"{name}-{tool}"
-            runs = [measure(_command(tool, folder, out), out) for _ in range(count)]
-            cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]} | {"runs": count}
+        counts = {
+            t: args.baseline_runs if t in BASELINES and args.baseline_runs else args.runs for t in tools
+        }
+        measured: dict[str, list[dict[str, float]]] = {t: [] for t in tools}
+        for round_index in range(max(counts.values())):  # interleaved: this machine's speed drifts
+            for tool in tools:
+                if round_index < counts[tool]:
+                    out = args.data / "out" / f"{name}-{tool}"
+                    measured[tool].append(measure(_command(tool, folder, out), out))
+        for tool, runs in measured.items():
+            cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]} | {
+                "runs": len(runs)
+            }
             print(f"{name} {tool}: {cells[tool]}", file=sys.stderr, flush=True)
         earlier = results["workloads"].get(name, {}).get("tools", {})
         results["workloads"][name] = {

@@ -82,7 +82,6 @@ class Frame:
     tick_ns: int
     vectors: dict[str, npt.NDArray[np.float64]]
     images: dict[str, npt.NDArray[np.uint8]]
-    sources: Sequence[AlignedSource]
 
 
 def _decode(source: AlignedSource, message: BagMessage) -> Any:
@@ -121,7 +120,7 @@ def assemble_frames(
     def emit_ready() -> None:
         nonlocal next_tick
         while next_tick < total and ready(next_tick):
-            on_frame(_frame(next_tick, int(ticks_ns[next_tick]), features, by_key, sources))
+            on_frame(_frame(next_tick, int(ticks_ns[next_tick]), features, by_key))
             _release(sources, next_tick)
             next_tick += 1
 
@@ -156,7 +155,6 @@ def _frame(
     tick_ns: int,
     features: Sequence[FeatureSpec],
     by_key: dict[str, list[AlignedSource]],
-    sources: Sequence[AlignedSource],
 ) -> Frame:
     vectors: dict[str, npt.NDArray[np.float64]] = {}
     images: dict[str, npt.NDArray[np.uint8]] = {}
@@ -166,7 +164,7 @@ def _frame(
             images[feature.key] = parts[0]
         else:
             vectors[feature.key] = parts[0] if len(parts) == 1 else np.concatenate(parts)
-    return Frame(k, tick_ns, vectors, images, sources)
+    return Frame(k, tick_ns, vectors, images)
 
 
 def _release(sources: Sequence[AlignedSource], k: int) -> None:

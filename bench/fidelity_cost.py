@@ -14,25 +14,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
-import numpy.typing as npt
 import yaml
 
+from bagport.synth.pixels import textured_frame
 from bagport.video import EncoderSettings, FidelityRecorder, StreamingEncoder, compare_clip, iter_frames
 
 CODECS = Path(__file__).resolve().parent.parent / "configs" / "codecs"
-
-
-def natural(k: int, h: int, w: int) -> npt.NDArray[np.uint8]:
-    rng = np.random.default_rng(k)
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    base = np.stack([xx / w * 200 + 20, yy / h * 180 + 30, (xx + yy) / (w + h) * 150 + 50], axis=2)
-    base += (25 * np.sin(xx / 3.0 + k * 0.3) * np.cos(yy / 5.0))[:, :, None]
-    cy, cx = h / 2 + h / 3 * np.sin(k / 9), w / 2 + w / 3 * np.cos(k / 7)
-    blob = np.exp(-(((yy - cy) / (h / 8)) ** 2 + ((xx - cx) / (w / 8)) ** 2))
-    base += 80 * blob[:, :, None] * np.array([1.0, -0.5, 0.3])
-    base += rng.normal(0, 6, base.shape)
-    return np.clip(base, 0, 255).astype(np.uint8)
 
 
 def main(frames: int, workdir: Path) -> None:
@@ -44,7 +31,7 @@ def main(frames: int, workdir: Path) -> None:
         "size     codec            encode ms/f  record ms/f  compare ms/f  decode ms/f  kB/f  psnr min/med  damaged"
     )
     for h, w in ((240, 320), (480, 640)):
-        source = [natural(k, h, w) for k in range(frames)]
+        source = [textured_frame(k, h, w) for k in range(frames)]
         for name, settings in presets.items():
             clip = workdir / f"{name}-{h}.mp4"
             recorder = FidelityRecorder(workdir / f"{name}-{h}.refs", height=h, width=w)

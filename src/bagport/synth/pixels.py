@@ -10,7 +10,14 @@ from __future__ import annotations
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["CODE_BITS", "bar_means", "decode_frame_index", "expected_bar_colours", "render_frame"]
+__all__ = [
+    "CODE_BITS",
+    "bar_means",
+    "decode_frame_index",
+    "expected_bar_colours",
+    "render_frame",
+    "textured_frame",
+]
 
 CODE_BITS = 10
 _COLS = 5
@@ -63,6 +70,22 @@ def render_frame(
         if code >> bit & 1:
             frame[ys, xs] = 255
     return frame
+
+
+def textured_frame(index: int, height: int, width: int) -> Rgb:
+    """A camera-like frame: gradients, texture, a blob moving with ``index`` and sensor noise (seeded
+    by ``index``). Lossy codecs lose detail on it the way they do on real images."""
+    rng = np.random.default_rng(index)
+    yy, xx = np.mgrid[0:height, 0:width].astype(np.float32)
+    base = np.stack(
+        [xx / width * 200 + 20, yy / height * 180 + 30, (xx + yy) / (width + height) * 150 + 50], axis=2
+    )
+    base += (25 * np.sin(xx / 3.0 + index * 0.3) * np.cos(yy / 5.0))[:, :, None]
+    cy, cx = height / 2 + height / 3 * np.sin(index / 9), width / 2 + width / 3 * np.cos(index / 7)
+    blob = np.exp(-(((yy - cy) / (height / 8)) ** 2 + ((xx - cx) / (width / 8)) ** 2))
+    base += 80 * blob[:, :, None] * np.array([1.0, -0.5, 0.3])
+    base += rng.normal(0, 6, base.shape)
+    return np.clip(base, 0, 255).astype(np.uint8)
 
 
 def decode_frame_index(rgb: Rgb) -> int:

@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 from bagport.errors import VideoError
+from bagport.synth.pixels import textured_frame
 from bagport.video import (
     EncoderSettings,
     FidelityParams,
@@ -52,19 +53,6 @@ def squares(k: int, h: int = H, w: int = W, seed: int = 0) -> Frame:
     bar = (5 * k) % w
     img[:, bar : bar + 3] = 255
     return img
-
-
-def noisy(k: int, h: int = H, w: int = W) -> Frame:
-    """Natural-ish: gradients, texture, a moving blob and sensor noise."""
-    rng = np.random.default_rng(k)
-    yy, xx = np.mgrid[0:h, 0:w].astype(np.float32)
-    base = np.stack([xx / w * 200 + 20, yy / h * 180 + 30, (xx + yy) / (w + h) * 150 + 50], axis=2)
-    base += (25 * np.sin(xx / 3.0 + k * 0.3) * np.cos(yy / 5.0))[:, :, None]
-    cy, cx = h / 2 + h / 3 * np.sin(k / 9), w / 2 + w / 3 * np.cos(k / 7)
-    blob = np.exp(-(((yy - cy) / (h / 8)) ** 2 + ((xx - cx) / (w / 8)) ** 2))
-    base += 80 * blob[:, :, None] * np.array([1.0, -0.5, 0.3])
-    base += rng.normal(0, 6, base.shape)
-    return np.clip(base, 0, 255).astype(np.uint8)
 
 
 def encode(
@@ -110,7 +98,7 @@ def _copy_of_previous(frames: list[Frame], k: int) -> None:
 
 
 def test_lossless_encode_reports_no_damage(tmp_path: Path) -> None:
-    source = [squares(k) for k in range(N)] + [noisy(k) for k in range(N)]
+    source = [squares(k) for k in range(N)] + [textured_frame(k, H, W) for k in range(N)]
     clip, recorder = encode(tmp_path, source)
     result = compare_clip(clip, recorder, fps=30)
     assert (result.frames_expected, result.frames_decoded, result.sampled_frames) == (2 * N, 2 * N, 2 * N)
@@ -283,7 +271,7 @@ def test_archival_preset_is_near_lossless_and_loads_in_lerobot(tmp_path: Path) -
     from lerobot.datasets.video_utils import decode_video_frames  # noqa: PLC0415
 
     settings = EncoderSettings.from_dict(yaml.safe_load(ARCHIVAL.read_text()))
-    source = [squares(k) for k in range(6)] + [noisy(k) for k in range(6)]
+    source = [squares(k) for k in range(6)] + [textured_frame(k, H, W) for k in range(6)]
     clip, recorder = encode(tmp_path, source, settings=settings)
     result = compare_clip(clip, recorder, fps=30)
     assert result.damaged_frames == 0 and result.psnr_min_db is not None and result.psnr_min_db > 50

@@ -27,8 +27,8 @@ import numpy.typing as npt
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bagport.synth.pixels import render_frame
 from bagport.video import EncoderSettings, FidelityRecorder, StreamingEncoder, compare_clip
+from bench.report import write_section
 
-START, END = "<!-- codec:start -->", "<!-- codec:end -->"
 SIZES = ((96, 128), (240, 320), (480, 640))
 SETTINGS: dict[str, dict[str, Any]] = {
     "svtav1 p12 crf30 g2 (LeRobot default)": {},
@@ -130,13 +130,7 @@ def main() -> None:
             for h, w in SIZES:
                 results[(content.__name__, h, w)] = study(args.frames, content, h, w, Path(tmp))
                 print(f"{content.__name__} {h}x{w} done", file=sys.stderr, flush=True)
-    block = f"{START}\n{table(results, args.frames)}\n{END}"
-    text = args.report.read_text() if args.report.exists() else f"# Benchmarks\n\n{START}\n{END}\n"
-    if START in text and END in text:
-        text = text[: text.index(START)] + block + text[text.index(END) + len(END) :]
-    else:
-        text += "\n" + block + "\n"
-    args.report.write_text(text)
+    write_section(args.report, "codec", table(results, args.frames))
 
 
 if __name__ == "__main__":

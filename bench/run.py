@@ -30,11 +30,11 @@ from typing import Any
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.report import write_section
 from bench.workloads import WORKLOADS, ensure_workload
 
 BENCH = Path(__file__).resolve().parent
 REPO = BENCH.parent
-START, END = "<!-- results:start -->", "<!-- results:end -->"
 TOOLS = ("bagport", "lerobot", "lerobot-streaming", "floor")
 EXTRA_TOOLS = ("bagport-dask1", "bagport-dask2", "bagport-h264", "bagport-nofidelity")
 """Not run by default: bagport on a local Dask cluster of 1 or 2 worker processes (scaling),
@@ -146,13 +146,7 @@ def _table(results: dict[str, Any]) -> str:
 
 
 def write_report(results: dict[str, Any], report: Path) -> None:
-    table = f"{START}\n{_table(results)}\n{END}"
-    text = report.read_text() if report.exists() else f"# Benchmarks\n\n{START}\n{END}\n"
-    if START in text and END in text:
-        text = text[: text.index(START)] + table + text[text.index(END) + len(END) :]
-    else:
-        text += "\n" + table + "\n"
-    report.write_text(text)
+    write_section(report, "results", _table(results))
 
 
 def main() -> None:

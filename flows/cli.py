@@ -95,6 +95,7 @@ def _convert(args: argparse.Namespace) -> int:
         video_files_size_in_mb=args.video_files_size_in_mb,
         qa=args.qa,
         on_qa_fail=args.on_qa_fail,
+        keep_failed=args.keep_failed,
     )
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
@@ -110,14 +111,16 @@ def _convert(args: argparse.Namespace) -> int:
         print(summary_json(report))
     wall_s = time.perf_counter() - started
     for row in report.excluded:
-        print(f"excluded bags[{row['manifest_entry']}] {row['bag_uri']}: {row['reason']}", file=sys.stderr)
+        where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
+        print(f"excluded bags[{row['manifest_entry']}] {where}: {row['reason']}", file=sys.stderr)
     print(
         f"converted {report.duration_s:.1f} s of recordings ({report.episodes} episode(s), "
         f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time; QA report: "
         f"{report.root.rstrip('/')}/meta/qa/report.html",
         file=sys.stderr,
     )
-    return 1 if report.excluded else 0
+    # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
+    return 1 if any(not row.get("excluded_by_label") for row in report.excluded) else 0
 
 
 def _cmd_qa(args: argparse.Namespace) -> int:
@@ -248,6 +251,11 @@ def _parser() -> argparse.ArgumentParser:
         choices=["exclude", "keep", "fail_run"],
         default=None,
         help="episodes failing QA or conversion: leave out (default), keep and flag, or fail the run",
+    )
+    convert.add_argument(
+        "--keep-failed",
+        action="store_true",
+        help="keep episodes labelled failed or discarded by episode events (default: leave them out, listed)",
     )
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(

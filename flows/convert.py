@@ -19,13 +19,16 @@ from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTa
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.dataset.history import dataset_report
+from bagport.episode import EpisodeRequest
 from bagport.errors import BagportError
-from bagport.run import EpisodeFailure, plan_run
+from bagport.run import EpisodeFailure, RunPlan, plan_run
+from bagport.segment import segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
 from flows.local_server import take_launched
 from tasks.episode import convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
+from tasks.segment import segment_bag_task
 
 __all__ = ["ConversionError", "convert_flow", "run_config", "run_convert"]
 
@@ -47,19 +50,20 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
             "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
         )
         return dataset_report(config.output)
+    requests, failures = _segment(plan)
+    unsegmented = len(failures)  # bags that could not even be split into episodes
     futures = []
-    for request in plan.requests:
-        label = _label(request.bag_uri)
+    for request in requests:
+        label = request.name
         # Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
-        with tags(f"robot:{plan.contract.robot_type}", f"bag:{label}"):
+        with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
             futures.append(convert_episode_task.submit(request.to_dict(), label=label))
     progress = Progress(len(futures))
     for done in as_completed(futures):
         done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
         progress.advance()
     staged: list[dict[str, Any]] = []
-    failures: list[EpisodeFailure] = []
-    for request, future in zip(plan.requests, futures, strict=True):
+    for request, future in zip(requests, futures, strict=True):
         state = future.state
         if state.is_completed():
             result = future.result()
@@ -67,14 +71,12 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
             staged.append(result)
             continue
         # A bad bag's task ends Failed with bagport's one-paragraph error as its message.
-        failures.append(
-            EpisodeFailure(request.bag_uri, request.manifest_entry, state.message or str(state.name))
-        )
+        failures.append(EpisodeFailure.of(request, state.message or str(state.name)))
     if failures:
         logger.warning(
-            "%d of %d bag(s) failed; the QA policy (on_fail: %s) decides what happens to the run:\n%s",
+            "%d of %d episode(s) failed; the QA policy (on_fail: %s) decides what happens to the run:\n%s",
             len(failures),
-            len(plan.requests),
+            len(requests) + unsegmented,
             plan.qa.on_fail,
             "\n".join(f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures),
         )
@@ -85,6 +87,31 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     report: DatasetReport = reduced.result()  # type: ignore[assignment] # completed: a report
     publish_run_artifacts(report)
     return report
+
+
+def _segment(plan: RunPlan) -> tuple[list[EpisodeRequest], list[EpisodeFailure]]:
+    """One request per episode: bags split into their episodes by mapped tasks when the contract asks."""
+    if not segments_bags(plan.contract):
+        return list(plan.requests), []
+    futures = []
+    for request in plan.requests:
+        with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
+            futures.append(segment_bag_task.submit(request.to_dict(), label=_label(request.bag_uri)))
+    requests: list[EpisodeRequest] = []
+    failures: list[EpisodeFailure] = []
+    for request, future in zip(plan.requests, futures, strict=True):
+        future.wait()
+        state = future.state
+        if not state.is_completed():
+            failures.append(EpisodeFailure.of(request, state.message or str(state.name)))
+            continue
+        result = future.result()
+        assert isinstance(result, dict)  # completed: the task returned the requests
+        if not result["requests"]:
+            reasons = "; ".join(result["ignored"]) or "the bag is empty"
+            failures.append(EpisodeFailure.of(request, f"no episode found in the bag ({reasons})"))
+        requests += [EpisodeRequest(**item) for item in result["requests"]]
+    return requests, failures
 
 
 @contextmanager

@@ -58,6 +58,10 @@ class ConvertConfig(BaseModel):
     on_qa_fail: Literal["exclude", "keep", "fail_run"] | None = Field(
         default=None, description="Override the QA file's on_fail: exclude, keep (and flag) or fail_run."
     )
+    keep_failed: bool = Field(
+        default=False,
+        description="Keep episodes labelled failed or discarded by episode events (default: leave them out).",
+    )
 
     @model_validator(mode="after")
     def _one_bag_source(self) -> ConvertConfig:

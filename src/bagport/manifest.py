@@ -6,6 +6,9 @@ bags:
     task: pick up the red cube     # used when the bag itself carries no task prompt
     metadata: {operator: alice}
   - uri: s3://fleet/2026-11-*/*.mcap   # globs expand, sorted
+  - uri: bags/long_session           # one episode of a bag: a window in seconds from the bag's
+    start_s: 12.5                    #   first message (start_s/end_s) or in ROS time (start_ns/end_ns);
+    end_s: 47.0                      #   the same bag may be listed again with another window
 ```
 Relative paths are relative to the manifest file.
 """
@@ -35,6 +38,25 @@ class _Entry(pydantic.BaseModel):
     uri: str = pydantic.Field(min_length=1)
     task: str | None = None
     metadata: dict[str, Any] = pydantic.Field(default_factory=dict)
+    start_s: float | None = pydantic.Field(default=None, ge=0)
+    end_s: float | None = pydantic.Field(default=None, gt=0)
+    start_ns: int | None = pydantic.Field(default=None, ge=0)
+    end_ns: int | None = pydantic.Field(default=None, gt=0)
+
+    @pydantic.model_validator(mode="after")
+    def _one_window(self) -> _Entry:
+        if self.start_s is not None and self.start_ns is not None:
+            raise ValueError("give start_s (seconds from the bag start) or start_ns (ROS time), not both")
+        if self.end_s is not None and self.end_ns is not None:
+            raise ValueError("give end_s (seconds from the bag start) or end_ns (ROS time), not both")
+        for start, end in ((self.start_s, self.end_s), (self.start_ns, self.end_ns)):
+            if start is not None and end is not None and end <= start:
+                raise ValueError(f"the window ends ({end}) before it starts ({start})")
+        return self
+
+    def window(self) -> dict[str, Any]:
+        fields = ("start_s", "end_s", "start_ns", "end_ns")
+        return {name: getattr(self, name) for name in fields if getattr(self, name) is not None}
 
 
 class _Manifest(pydantic.BaseModel):
@@ -50,6 +72,9 @@ class BagEntry:
     entry: int
     task: str | None = None
     metadata: dict[str, Any] = field(default_factory=dict)
+    window: dict[str, Any] = field(default_factory=dict)
+    """``start_s``/``end_s`` (seconds from the bag start) or ``start_ns``/``end_ns`` (ROS time); empty:
+    the whole bag (or the episodes the contract finds in it)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -123,22 +148,26 @@ def parse_manifest(
             f"line {line}: {where}: {first['msg']}",
             file=source,
             entry=entry,
-            fix="a manifest is 'bags:' followed by a list of {uri, task, metadata} entries.",
+            fix="a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries.",
         ) from err
     bags: list[BagEntry] = []
-    seen: dict[str, int] = {}
+    seen: dict[tuple[str, str], int] = {}
     for index, item in enumerate(model.bags):
         uri = _absolute(item.uri, base_dir)
+        window = item.window()
         for found in _expand(uri, index, source, dict(storage_options or {})):
-            if found in seen:
+            key = (found, repr(sorted(window.items())))
+            if key in seen:
                 raise ManifestError(
-                    f"bag {found!r} is listed twice (also bags[{seen[found]}])",
+                    f"bag {found!r} is listed twice (also bags[{seen[key]}])",
                     file=source,
                     entry=index,
-                    fix="remove the duplicate; one bag is one episode.",
+                    fix="remove the duplicate; one bag (or one window of it: start_s/end_s) is one episode.",
                 )
-            seen[found] = index
-            bags.append(BagEntry(uri=found, entry=index, task=item.task, metadata=dict(item.metadata)))
+            seen[key] = index
+            bags.append(
+                BagEntry(uri=found, entry=index, task=item.task, metadata=dict(item.metadata), window=window)
+            )
     return Manifest(source=source, bags=tuple(bags))
 
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,11 +27,12 @@ from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
+from bagport.segment import EXCLUDED_LABELS, segment_request, segments_bags
 from bagport.staging import QA_FILE, EpisodeSummary, read_summary
 from bagport.uris import is_local, read_text
 from bagport.video import EncoderSettings
 
-__all__ = ["EpisodeFailure", "RunPlan", "plan_run", "reduce_run"]
+__all__ = ["EpisodeFailure", "RunPlan", "plan_run", "reduce_run", "segment_all"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,6 +52,15 @@ class EpisodeFailure:
     bag_uri: str
     manifest_entry: int
     error: str
+    segment: int | None = None
+    label: str | None = None
+    note: str = ""
+
+    @classmethod
+    def of(cls, request: EpisodeRequest, error: str) -> EpisodeFailure:
+        return cls(
+            request.bag_uri, request.manifest_entry, error, request.segment, request.label, request.note
+        )
 
 
 def plan_run(config: ConvertConfig) -> RunPlan:
@@ -85,7 +95,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     staging = config.resolved_staging()
     requests = tuple(
         EpisodeRequest(
-            episode_id=episode_id_for(bag.uri, contract_text, config.encoder),
+            episode_id=episode_id_for(bag.uri, contract_text, config.encoder, window_key(bag.window)),
             bag_uri=bag.uri,
             manifest_entry=bag.entry,
             staging_uri=staging,
@@ -95,11 +105,37 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             default_task=bag.task,
             metadata=bag.metadata,
             qa=qa.model_dump(mode="json"),
+            **bag.window,
         )
         for bag in manifest.bags
         if not done or (bag.uri, source_stamp(bag.uri)) not in done
     )
     return RunPlan(config, contract, manifest, requests, contract_text, qa)
+
+
+def window_key(window: dict[str, Any]) -> str:
+    """A manifest window as the text its request's :meth:`EpisodeRequest.window_key` gives."""
+    if not window:
+        return ""
+    return EpisodeRequest("", "", 0, "", "", "", **window).window_key()
+
+
+def segment_all(plan: RunPlan) -> tuple[tuple[EpisodeRequest, ...], tuple[str, ...]]:
+    """Every episode request of the run: each bag split into its episodes (serially; the flow maps
+    :func:`bagport.segment.segment_request` over the bags instead). Also what segmentation left out."""
+    if not segments_bags(plan.contract):
+        return plan.requests, ()
+    requests: list[EpisodeRequest] = []
+    ignored: list[str] = []
+    for request in plan.requests:
+        found = segment_request(request)
+        requests += found.requests
+        ignored += [f"{request.bag_uri}: {reason}" for reason in found.ignored]
+    return tuple(requests), tuple(ignored)
+
+
+def _label_reason(label: str | None, note: str) -> str:
+    return f"labelled {label}" + (f" ({note})" if note else "") + "; --keep-failed keeps it"
 
 
 def run_record(plan: RunPlan) -> dict[str, Any]:
@@ -115,6 +151,13 @@ def run_record(plan: RunPlan) -> dict[str, Any]:
         "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
         "host_cpus": os.cpu_count(),
     }
+
+
+@dataclass(frozen=True, slots=True)
+class _Episode:
+    segment: int | None
+    label: str | None
+    note: str
 
 
 def _read_qa(summary: EpisodeSummary) -> EpisodeQA:
@@ -136,29 +179,44 @@ def select_episodes(
     keeps failing episodes (flagged in ``meta/qa``), ``fail_run`` stops before anything is written.
     """
     policy = plan.qa.on_fail
-    rows: list[tuple[int, EpisodeQA, EpisodeSummary | None]] = [
-        (s.manifest_entry, _read_qa(s), s) for s in summaries
+    keep_labelled = plan.config.keep_failed
+    rows: list[tuple[int, EpisodeQA, EpisodeSummary | None, _Episode]] = [
+        (s.manifest_entry, _read_qa(s), s, _Episode(s.segment, s.label, s.note)) for s in summaries
     ]
-    rows += [(f.manifest_entry, EpisodeQA.failed(f.bag_uri, f.error), None) for f in failures]
-    rows.sort(key=lambda row: row[0])
-    failing = [(entry, qa) for entry, qa, summary in rows if qa.verdict == "fail" and summary is not None]
-    if policy == "fail_run" and (failing or failures):
+    rows += [
+        (f.manifest_entry, EpisodeQA.failed(f.bag_uri, f.error), None, _Episode(f.segment, f.label, f.note))
+        for f in failures
+    ]
+    rows.sort(key=lambda row: (row[0], row[1].bag_uri, -1 if row[3].segment is None else row[3].segment))
+    by_label = [not keep_labelled and row[3].label in EXCLUDED_LABELS for row in rows]
+    failing = [
+        (entry, qa)
+        for (entry, qa, summary, _), labelled in zip(rows, by_label, strict=True)
+        if qa.verdict == "fail" and summary is not None and not labelled
+    ]
+    failed = [
+        f for f in failures if keep_labelled or f.label not in EXCLUDED_LABELS
+    ]  # a failed demonstration that could not be converted either is left out by its label
+    if policy == "fail_run" and (failing or failed):
         lines = [f"- bags[{entry}] {qa.bag_uri}: {qa.headline()}" for entry, qa in failing]
-        lines += [f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures]
+        lines += [f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failed]
         raise QualityError(
             f"{len(lines)} of {len(rows)} bag(s) {QualityError.MARKER} and on_fail is 'fail_run'; nothing was "
             f"written at {plan.config.output}.\n" + "\n".join(lines),
         )
     kept: list[EpisodeSummary] = []
     entries: list[QAEntry] = []
-    for entry, qa, summary in rows:
-        if summary is None:
-            entries.append(QAEntry(qa, entry, None, f"conversion failed: {qa.error}"))
+    for (entry, qa, summary, episode), labelled in zip(rows, by_label, strict=True):
+        if labelled:
+            row = QAEntry(qa, entry, None, _label_reason(episode.label, episode.note), by_label=True)
+        elif summary is None:
+            row = QAEntry(qa, entry, None, f"conversion failed: {qa.error}")
         elif qa.verdict == "fail" and policy == "exclude":
-            entries.append(QAEntry(qa, entry, None, f"excluded by QA: {qa.headline()}"))
+            row = QAEntry(qa, entry, None, f"excluded by QA: {qa.headline()}")
         else:
-            entries.append(QAEntry(qa, entry, len(kept)))
+            row = QAEntry(qa, entry, len(kept))
             kept.append(summary)
+        entries.append(replace(row, segment=episode.segment, label=episode.label, note=episode.note))
     if not kept:
         reasons = "\n".join(
             f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries
@@ -166,7 +224,7 @@ def select_episodes(
         raise QualityError(
             f"no episode is left to write: all {len(entries)} bag(s) {QualityError.MARKER}.\n{reasons}\n"
             "Fix: look at the reasons above; relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep "
-            "failing episodes."
+            "failing episodes (--keep-failed keeps episodes labelled failed or discarded)."
         )
     return kept, entries
 

@@ -81,6 +81,12 @@ class EpisodeSummary:
     qa: dict[str, Any] = field(default_factory=dict)
     """QA score, verdict and the checks that did not pass (the full record is ``qa.json``)."""
     qa_sha256: str = ""
+    window_ns: tuple[int, int] | None = None
+    """The episode's window in bag log time when the bag holds several episodes (or a manifest window)."""
+    segment: int | None = None
+    label: str | None = None
+    """``success``, ``failed``, ``discarded`` (episode events), or ``None``."""
+    note: str = ""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -100,6 +106,8 @@ class EpisodeSummary:
         )
         values = {k: v for k, v in data.items() if k != "features"}
         values["tasks"] = tuple(values["tasks"])
+        if values.get("window_ns") is not None:
+            values["window_ns"] = tuple(values["window_ns"])
         return cls(features=features, **values)
 
     def file(self, name: str) -> str:

@@ -8,11 +8,13 @@ from bagport.bags.reader import BagReader, open_bag
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.stamp import source_stamp
 from bagport.bags.text import format_bag_info
+from bagport.bags.window import BagWindow
 
 __all__ = [
     "BagInfo",
     "BagMessage",
     "BagReader",
+    "BagWindow",
     "Storage",
     "TopicInfo",
     "detect_storage",

@@ -35,7 +35,11 @@ class BagReader(Protocol):
     @property
     def info(self) -> BagInfo: ...
 
-    def messages(self, topics: Sequence[str] | None = None) -> Iterator[BagMessage]: ...
+    def messages(
+        self, topics: Sequence[str] | None = None, *, start_ns: int | None = None, stop_ns: int | None = None
+    ) -> Iterator[BagMessage]:
+        """Messages in log-time order; only those logged in ``[start_ns, stop_ns)`` when given."""
+        ...
 
     def close(self) -> None: ...
 
@@ -130,7 +134,9 @@ class RosbagsReader:
         _, (nodetype, detail) = fields[1][0]
         return self._layout if nodetype == Nodetype.NAME and detail == _HEADER else None
 
-    def messages(self, topics: Sequence[str] | None = None) -> Iterator[BagMessage]:
+    def messages(
+        self, topics: Sequence[str] | None = None, *, start_ns: int | None = None, stop_ns: int | None = None
+    ) -> Iterator[BagMessage]:
         wanted = None if topics is None else frozenset(topics)
         conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if not conns:
@@ -138,7 +144,7 @@ class RosbagsReader:
         layouts = {c.msgtype: self._header_layout(c.msgtype) for c in conns}
         deserialize = self._reader.deserialize
         try:
-            for conn, log_ns, raw in self._reader.messages(connections=conns):
+            for conn, log_ns, raw in self._reader.messages(connections=conns, start=start_ns, stop=stop_ns):
                 yield BagMessage(
                     conn.topic, conn.msgtype, int(log_ns), raw, deserialize, layouts[conn.msgtype]
                 )

@@ -17,6 +17,9 @@ __all__ = [
     "ActionEntry",
     "AlignOptions",
     "Contract",
+    "DoneSignal",
+    "EpisodeEvents",
+    "EpisodesOptions",
     "ImageOptions",
     "ObservationEntry",
     "Publish",
@@ -143,6 +146,39 @@ class ScalarEntry(_Strict):
     qos: dict[str, Any] | None = None
 
 
+class EpisodeEvents(_Strict):
+    """An event topic whose messages split a bag into episodes (``START``, ``SUCCESS``, ``FAIL``,
+    ``DISCARD``, ``RESET``): a ``std_msgs/String`` holding the event name or JSON
+    ``{"event": ..., "note": ...}``, or ``field`` (a dot path) of any message."""
+
+    topic: Topic
+    type: MsgType = "std_msgs/msg/String"
+    field: str | None = None
+    """Dot path to the event name; default ``data``."""
+    note_field: str | None = None
+    """Dot path to a free-text note (JSON strings carry it as ``note``)."""
+
+
+class DoneSignal(_Strict):
+    """A topic whose value turning true (non-zero) ends the current episode (e.g. ``next.done``)."""
+
+    topic: Topic
+    type: MsgType = "std_msgs/msg/Bool"
+    field: str | None = None
+    """Dot path to the value; default ``data``."""
+
+
+class EpisodesOptions(_Strict):
+    """How a bag splits into episodes (bagport extension; without it one bag is one episode)."""
+
+    events: EpisodeEvents | None = None
+    gap_s: PositiveFloat | None = None
+    """A silence longer than this on every contract stream splits the episode."""
+    done_signal: DoneSignal | None = None
+    min_duration_s: float = Field(default=1.0, ge=0)
+    """Shorter windows are dropped (listed with the reason)."""
+
+
 class Contract(_Strict):
     robot_type: str = Field(validation_alias=AliasChoices("robot_type", "name"))
     fps: PositiveInt = Field(default=30, validation_alias=AliasChoices("fps", "rate_hz"))
@@ -160,3 +196,7 @@ class Contract(_Strict):
     info: Any = None
     timestamp_source: StampSource | None = None
     max_duration_s: PositiveFloat | None = None
+    episodes: EpisodesOptions | None = None
+    """bagport extension: episodes inside a bag (events, gaps, a done signal)."""
+    default_task: str | None = None
+    """bagport extension: the task when neither a task topic, the bag nor the manifest gives one."""

@@ -124,6 +124,15 @@ def _stat_columns(stats: dict[str, FeatureStats], keys: Sequence[str]) -> dict[s
     return row
 
 
+_LABEL_COLUMNS = ("label", "label_note")
+
+
+def _has_label_columns(root: Path) -> bool:
+    """Whether the dataset's existing episode files carry the label columns (older ones do not)."""
+    existing = sorted((root / "meta" / "episodes").glob("chunk-*/file-*.parquet"))
+    return not existing or all(name in pq.read_schema(existing[0]).names for name in _LABEL_COLUMNS)
+
+
 def write_meta(
     root: Path,
     summaries: Sequence[EpisodeSummary],
@@ -158,6 +167,8 @@ def write_meta(
             "data/file_index": placement.file_index,
             "dataset_from_index": placement.from_index,
             "dataset_to_index": placement.to_index,
+            "label": summary.label,
+            "label_note": summary.note,
         }
         for key, placed in videos.items():
             video = placed[n]
@@ -171,7 +182,14 @@ def write_meta(
         rows.append(row)
     episodes_path = root / EPISODES_PATH.format(chunk_index=episodes_file[0], file_index=episodes_file[1])
     episodes_path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(pa.Table.from_pylist(rows), episodes_path)
+    table = pa.Table.from_pylist(rows)
+    for name in _LABEL_COLUMNS:  # typed even when every episode's label is null
+        table = table.set_column(
+            table.schema.get_field_index(name), name, table.column(name).cast(pa.string())
+        )
+    if base is not None and not _has_label_columns(root):
+        table = table.drop_columns(list(_LABEL_COLUMNS))  # LeRobot loads episode files of one schema only
+    pq.write_table(table, episodes_path)
 
     merged: dict[str, Any] = {}
     histograms: dict[str, list[int]] = {}

@@ -78,6 +78,10 @@ def write_provenance(
             "alignment": s.alignment,
             "qa": s.qa,
             "metadata": s.metadata,
+            "segment": s.segment,
+            "window_ns": list(s.window_ns) if s.window_ns is not None else None,
+            "label": s.label,
+            "label_note": s.note,
         }
         for i, s in enumerate(summaries, first_episode)
     ]

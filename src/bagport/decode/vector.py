@@ -90,26 +90,32 @@ class _JointStateExtractor:
         return out
 
 
-def _resolve_path(msg: Any, path: str, src: SourceSpec) -> float:
+def field_at(msg: Any, path: str, topic: str) -> Any:
+    """The value at dot path ``path`` (``a.b[2].c``) of a deserialised message."""
     value = msg
     for part in path.split("."):
         match = _PATH_PART.match(part)
         if match is None:
-            raise DecodeError(f"selector {path!r} is not a dot path like 'a.b[2].c'", topic=src.topic)
+            raise DecodeError(f"selector {path!r} is not a dot path like 'a.b[2].c'", topic=topic)
         attr, index = match.group(1), match.group(2)
         if not hasattr(value, attr):
             fields = [f for f in getattr(value, "__dataclass_fields__", {}) if not f.startswith("_")]
             raise DecodeError(
                 f"selector {path!r}: {type(value).__name__} has no field {attr!r} (fields: {fields})",
-                topic=src.topic,
-                fix="fix selector.names in the contract.",
+                topic=topic,
+                fix="fix the dot path in the contract.",
             )
         value = getattr(value, attr)
         if index is not None:
             try:
                 value = value[int(index)]
             except (IndexError, TypeError) as err:
-                raise DecodeError(f"selector {path!r}: index {index} out of range", topic=src.topic) from err
+                raise DecodeError(f"selector {path!r}: index {index} out of range", topic=topic) from err
+    return value
+
+
+def _resolve_path(msg: Any, path: str, src: SourceSpec) -> float:
+    value = field_at(msg, path, src.topic)
     try:
         return float(value)
     except (TypeError, ValueError) as err:

@@ -6,9 +6,10 @@ import hashlib
 
 from bagport.bags import BagInfo
 from bagport.contract import ContractPlan, normalize_msgtype
+from bagport.episode.timeline import Timeline
 from bagport.errors import AlignmentError, ContractError
 
-__all__ = ["bag_fingerprint", "check_bag_fits"]
+__all__ = ["bag_fingerprint", "check_bag_fits", "check_window_has_data"]
 
 
 def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
@@ -39,6 +40,22 @@ def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
                 f"topic {source.topic} (for {source.key!r}) has no messages",
                 uri=info.uri,
                 fix="record the topic, or drop this bag from the manifest.",
+            )
+
+
+def check_window_has_data(
+    timeline: Timeline, window_ns: tuple[int, int], bag_start_ns: int, uri: str
+) -> None:
+    """Every contract stream has messages inside an episode window."""
+    start_s, end_s = ((t - bag_start_ns) / 1e9 for t in window_ns)
+    for topic in timeline.topics.values():
+        if topic.count == 0:
+            raise AlignmentError(
+                f"topic {topic.topic} has no messages in the episode window {start_s:.3f}..{end_s:.3f} s "
+                "(from the bag start)",
+                uri=uri,
+                topic=topic.topic,
+                fix="check the window (manifest start_s/end_s or start_ns/end_ns, or the episode events).",
             )
 
 

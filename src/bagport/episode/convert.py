@@ -13,12 +13,12 @@ import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport import __version__
-from bagport.bags import open_bag, source_stamp
+from bagport.bags import BagReader, BagWindow, open_bag, source_stamp
 from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
-from bagport.episode.checks import bag_fingerprint, check_bag_fits
+from bagport.episode.checks import bag_fingerprint, check_bag_fits, check_window_has_data
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
@@ -109,12 +109,20 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     reusable = _reusable(request, stamp)
     if reusable is not None:
         return reusable
-    with open_bag(request.bag_uri) as reader:
-        info = reader.info
+    with open_bag(request.bag_uri) as whole:
+        info = whole.info
         check_bag_fits(info, plan)
-        timeline = scan_timeline(reader, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics])
+        window = request.window_ns(info.start_ns, info.end_ns)
+        reader: BagReader = whole if window is None else BagWindow(whole, *window)
+        timeline = scan_timeline(
+            whole, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics], window
+        )
+        if window is not None:
+            check_window_has_data(timeline, window, info.start_ns, request.bag_uri)
         sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
-        frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
+        frame_tasks, task_source = resolve_tasks(
+            timeline.tasks, ticks, info.custom_data, request, plan.contract.default_task
+        )
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
         try:
             qa_config = QAConfig.model_validate(request.qa)
@@ -166,6 +174,10 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 stamp_sources={f"{s.src.key}@{s.src.topic}": s.stamp_used for s in sources},
                 videos={key: f"videos/{key}.mp4" for key in clips},
                 metadata=dict(request.metadata),
+                window_ns=window,
+                segment=request.segment,
+                label=request.label,
+                note=request.note,
                 bagport_version=__version__,
                 contract_sha256=request.contract_sha256,
                 source_stamp=stamp,
@@ -209,10 +221,17 @@ def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
         and existing.contract_sha256 == request.contract_sha256
         and existing.default_task == request.default_task
         and existing.qa_sha256 == request.qa_sha256
+        and existing.segment == request.segment
     )
     if not same:
         return None
-    return replace(existing, manifest_entry=request.manifest_entry, metadata=dict(request.metadata))
+    return replace(
+        existing,
+        manifest_entry=request.manifest_entry,
+        metadata=dict(request.metadata),
+        label=request.label,
+        note=request.note,
+    )
 
 
 def _staged_features(

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
+
+NS_PER_S = 1_000_000_000
 
 __all__ = ["EpisodeRequest", "episode_id_for"]
 
@@ -23,9 +25,72 @@ class EpisodeRequest:
     metadata: dict[str, Any] = field(default_factory=dict)
     qa: dict[str, Any] = field(default_factory=dict)
     """QA thresholds (a :class:`bagport.qa.QAConfig` as a dict); empty: the defaults."""
+    start_ns: int | None = None
+    end_ns: int | None = None
+    """The episode's window in bag log time (inclusive); ``None``: from the bag's start / to its end."""
+    start_s: float | None = None
+    end_s: float | None = None
+    """A manifest window in seconds from the bag's first message (resolved when the bag is open)."""
+    segment: int | None = None
+    """Index of the episode among those of its bag (``None``: the whole bag is one episode)."""
+    label: str | None = None
+    """``success``, ``failed``, ``discarded`` (from episode events), or ``None``."""
+    note: str = ""
+    """The event's note, e.g. why an operator marked the demonstration failed."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
+
+    @property
+    def has_window(self) -> bool:
+        return any(v is not None for v in (self.start_ns, self.end_ns, self.start_s, self.end_s))
+
+    @property
+    def name(self) -> str:
+        """The bag's file name, with ``#<segment>`` for one episode of several in a bag."""
+        stem = self.bag_uri.rstrip("/").rsplit("/", 1)[-1]
+        return stem if self.segment is None else f"{stem}#{self.segment}"
+
+    def window_ns(self, bag_start_ns: int, bag_end_ns: int) -> tuple[int, int] | None:
+        """The absolute window of this episode in a bag spanning ``[bag_start_ns, bag_end_ns]``."""
+        if not self.has_window:
+            return None
+        start = bag_start_ns
+        end = bag_end_ns
+        if self.start_ns is not None:
+            start = self.start_ns
+        elif self.start_s is not None:
+            start = bag_start_ns + round(self.start_s * NS_PER_S)
+        if self.end_ns is not None:
+            end = self.end_ns
+        elif self.end_s is not None:
+            end = bag_start_ns + round(self.end_s * NS_PER_S)
+        return start, end
+
+    def window_key(self) -> str:
+        """The window as text, for the episode id (empty for a whole bag)."""
+        if not self.has_window:
+            return ""
+        return f"{self.start_ns}:{self.end_ns}:{self.start_s}:{self.end_s}"
+
+    def for_window(
+        self, segment: int, start_ns: int, end_ns: int, label: str | None, note: str
+    ) -> EpisodeRequest:
+        """The request for one episode of this bag."""
+        windowed = replace(
+            self,
+            start_ns=start_ns,
+            end_ns=end_ns,
+            start_s=None,
+            end_s=None,
+            segment=segment,
+            label=label,
+            note=note,
+        )
+        return replace(
+            windowed,
+            episode_id=episode_id_for(self.bag_uri, self.contract_text, self.encoder, windowed.window_key()),
+        )
 
     @property
     def contract_sha256(self) -> str:
@@ -36,10 +101,11 @@ class EpisodeRequest:
         return hashlib.sha256(json.dumps(self.qa, sort_keys=True).encode()).hexdigest()
 
 
-def episode_id_for(bag_uri: str, contract_text: str, encoder: dict[str, Any]) -> str:
-    """Stable id: the same bag, contract and encoder settings give the same staged episode."""
+def episode_id_for(bag_uri: str, contract_text: str, encoder: dict[str, Any], window: str = "") -> str:
+    """Stable id: the same bag (window), contract and encoder settings give the same staged episode."""
     digest = hashlib.sha256()
-    for part in (bag_uri, contract_text, repr(sorted(encoder.items()))):
+    parts = (bag_uri, contract_text, repr(sorted(encoder.items())))
+    for part in parts + ((window,) if window else ()):
         digest.update(part.encode())
         digest.update(b"\0")
     stem = bag_uri.rstrip("/").rsplit("/", 1)[-1]

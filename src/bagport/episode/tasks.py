@@ -21,12 +21,14 @@ def resolve_tasks(
     ticks_ns: npt.NDArray[np.int64],
     custom_data: Mapping[str, str],
     request: EpisodeRequest,
+    contract_default: str | None = None,
 ) -> tuple[list[str], str]:
     """Per-frame task strings and where they came from.
 
     Priority: the contract's task topic (held per frame; frames before the first
     prompt take the first prompt), then the bag's ``custom_data`` operator prompt
-    (Rosetta's recorder), then the manifest entry's ``task``.
+    (Rosetta's recorder), then the manifest entry's ``task``, then the contract's
+    ``default_task``.
     """
     prompts = [m for m in messages if m.text.strip()]
     if prompts:
@@ -40,8 +42,10 @@ def resolve_tasks(
         return [prompt] * int(ticks_ns.size), "bag_metadata"
     if request.default_task:
         return [request.default_task] * int(ticks_ns.size), "manifest"
+    if contract_default and contract_default.strip():
+        return [contract_default.strip()] * int(ticks_ns.size), "contract"
     raise ManifestError(
         f"bag {request.bag_uri} has no task prompt",
         entry=request.manifest_entry,
-        fix="add 'task: ...' to its manifest entry, or a 'tasks:' topic to the contract.",
+        fix="add 'task: ...' to its manifest entry, a 'tasks:' topic or a 'default_task' to the contract.",
     )

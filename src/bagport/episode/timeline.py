@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
-from bagport.bags import BagReader
+from bagport.bags import BagMessage, BagReader
 from bagport.errors import BagReadError
 
 __all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_timeline"]
@@ -53,22 +53,37 @@ class Timeline:
     tasks: tuple[TaskMessage, ...]
 
 
-def scan_timeline(reader: BagReader, topics: Iterable[str], task_topics: Iterable[str]) -> Timeline:
+def _task_message(message: BagMessage) -> TaskMessage:
+    stamp = message.header_stamp_ns()
+    return TaskMessage(stamp if stamp else message.log_time_ns, str(message.msg().data))
+
+
+def scan_timeline(
+    reader: BagReader,
+    topics: Iterable[str],
+    task_topics: Iterable[str],
+    window_ns: tuple[int, int] | None = None,
+) -> Timeline:
+    """Stamps of ``topics`` and the task prompts; with ``window_ns`` (log time, inclusive) only the
+    messages inside it, plus the task prompts before it (a prompt holds until the next)."""
     feature_topics = tuple(topics)
     task_set = frozenset(task_topics)
     log: dict[str, list[int]] = {t: [] for t in feature_topics}
     header: dict[str, list[int | None]] = {t: [] for t in feature_topics}
     tasks: list[TaskMessage] = []
-    for message in reader.messages(tuple(dict.fromkeys((*feature_topics, *task_set)))):
+    start_ns, stop_ns = (None, None) if window_ns is None else (window_ns[0], window_ns[1] + 1)
+    if start_ns is not None and task_set:
+        tasks += [_task_message(m) for m in reader.messages(tuple(sorted(task_set)), stop_ns=start_ns)]
+    wanted = tuple(dict.fromkeys((*feature_topics, *task_set)))
+    for message in reader.messages(wanted, start_ns=start_ns, stop_ns=stop_ns):
         if message.topic in task_set:
-            stamp = message.header_stamp_ns()
-            tasks.append(TaskMessage(stamp if stamp else message.log_time_ns, str(message.msg().data)))
+            tasks.append(_task_message(message))
         if message.topic in log:
             log[message.topic].append(message.log_time_ns)
             header[message.topic].append(message.header_stamp_ns())
     for topic in feature_topics:
         promised = reader.info.topic(topic)
-        if promised is not None and promised.count != len(log[topic]):
+        if window_ns is None and promised is not None and promised.count != len(log[topic]):
             raise BagReadError(
                 f"yielded {len(log[topic])} messages on {topic}, its index promises {promised.count}",
                 uri=reader.info.uri,

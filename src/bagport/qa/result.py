@@ -120,6 +120,13 @@ class QAEntry:
     episode_index: int | None
     """Index in the dataset; ``None`` when the episode was excluded or failed to convert."""
     excluded_reason: str | None = None
+    segment: int | None = None
+    """Index of the episode among those of its bag (``None``: the whole bag)."""
+    label: str | None = None
+    """The episode's label from episode events (``success``, ``failed``, ``discarded``)."""
+    note: str = ""
+    by_label: bool = False
+    """Left out because of its label (failed / discarded), not by QA."""
 
     def brief(self) -> dict[str, Any]:
         clips = self.qa.plots.get("fidelity", {}).values()
@@ -136,4 +143,8 @@ class QAEntry:
             "frames": self.qa.frames,
             "video_psnr_min_db": min(psnrs) if psnrs else None,
             "video_damaged_frames": sum(int(c.get("damaged_frames", 0)) for c in clips) if clips else None,
+            "segment": self.segment,
+            "label": self.label,
+            "note": self.note,
+            "excluded_by_label": self.by_label,
         }

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Literal
 
-from bagport.synth.faults import Faults
+from bagport.synth.faults import Faults, Window
 
 __all__ = ["CameraSpec", "EpisodeSpec"]
 
@@ -53,7 +53,17 @@ class EpisodeSpec:
     task: str | None = "pick up the red cube"
     seed: int = 0
     faults: Faults = field(default_factory=Faults)
+    prompts: tuple[tuple[float, str], ...] = ()
+    """More task prompts ``(t_s, text)`` on the task topic after the first (the task changes)."""
+    events: tuple[tuple[float, str], ...] = ()
+    """Episode events ``(t_s, text)`` on ``/episode_events`` (std_msgs/String), e.g. ``(3.0, "SUCCESS")``."""
+    done_at_s: tuple[float, ...] = ()
+    """``/done`` (std_msgs/Bool) turns true at these times and false 50 ms later."""
+    pauses: tuple[Window, ...] = ()
+    """No joint, action or camera message inside these windows (the recorder paused)."""
 
     JOINT_TOPIC = "/joint_states"
     ACTION_TOPIC = "/cmd"
     TASK_TOPIC = "/task_prompt"
+    EVENTS_TOPIC = "/episode_events"
+    DONE_TOPIC = "/done"

@@ -155,16 +155,35 @@ def _events(truth: GroundTruth) -> Iterator[tuple[int, str, int, int]]:
     """(log_ns, topic, index, stamp_ns) for every message, in log-time order."""
     spec = truth.spec
     events: list[tuple[int, str, int, int]] = []
+
+    def paused(stamp: int) -> bool:
+        return any(pause.contains(stamp, spec.start_ns) for pause in spec.pauses)
+
     for k, stamp in enumerate(truth.joint_stamps_ns().tolist()):
-        events.append((stamp + spec.joint_latency_ns, spec.JOINT_TOPIC, k, stamp))
+        if not paused(stamp):
+            events.append((stamp + spec.joint_latency_ns, spec.JOINT_TOPIC, k, stamp))
     for k, stamp in enumerate(truth.action_stamps_ns().tolist()):
-        events.append((stamp + spec.action_latency_ns, spec.ACTION_TOPIC, k, stamp))
+        if not paused(stamp):
+            events.append((stamp + spec.action_latency_ns, spec.ACTION_TOPIC, k, stamp))
     dropout = spec.faults.camera_dropout
     for cam in spec.cameras:
         for k, stamp in enumerate(truth.camera_stamps_ns(cam.name).tolist()):
             if dropout is not None and dropout.camera == cam.name and dropout.contains(stamp, spec.start_ns):
                 continue
-            events.append((stamp + cam.latency_ns, cam.topic, k, stamp))
+            if not paused(stamp):
+                events.append((stamp + cam.latency_ns, cam.topic, k, stamp))
+    for k, (t_s, _) in enumerate(spec.prompts, start=1):
+        stamp = spec.start_ns + round(t_s * NS)
+        events.append((stamp, spec.TASK_TOPIC, k, stamp))
+    for k, (t_s, _) in enumerate(spec.events):
+        stamp = spec.start_ns + round(t_s * NS)
+        events.append((stamp, spec.EVENTS_TOPIC, k, stamp))
+    for k, t_s in enumerate(spec.done_at_s):
+        stamp = spec.start_ns + round(t_s * NS)
+        events += [
+            (stamp, spec.DONE_TOPIC, 2 * k, stamp),
+            (stamp + NS // 20, spec.DONE_TOPIC, 2 * k + 1, stamp),
+        ]
     if spec.faults.estop_at_s is not None:
         for k in range(int(spec.duration_s * 10) + 1):
             stamp = spec.start_ns + k * NS // 10
@@ -186,6 +205,10 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
         types[spec.TASK_TOPIC] = "std_msgs/msg/String"
     if spec.faults.estop_at_s is not None:
         types[spec.faults.ESTOP_TOPIC] = "std_msgs/msg/Bool"
+    if spec.events:
+        types[spec.EVENTS_TOPIC] = "std_msgs/msg/String"
+    if spec.done_at_s:
+        types[spec.DONE_TOPIC] = "std_msgs/msg/Bool"
     joint_header_ns = spec.faults.joint_header_ns(truth.joint_stamps_ns())
     rng = np.random.default_rng(spec.seed + 1)
     writer: Any
@@ -208,7 +231,11 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
             elif topic == spec.ACTION_TOPIC:
                 msg = _action_message(msgs, truth, k, stamp)
             elif topic == spec.TASK_TOPIC:
-                msg = msgs.string(data=spec.task or "")
+                msg = msgs.string(data=spec.prompts[k - 1][1] if k else spec.task or "")
+            elif topic == spec.EVENTS_TOPIC:
+                msg = msgs.string(data=spec.events[k][1])
+            elif topic == spec.DONE_TOPIC:
+                msg = msgs.bool(data=k % 2 == 0)
             elif topic == spec.faults.ESTOP_TOPIC:
                 estop_s = spec.faults.estop_at_s or 0.0
                 msg = msgs.bool(data=estop_s <= (stamp - spec.start_ns) / NS < estop_s + 0.5)

@@ -1,0 +1,37 @@
+"""Episodes inside a bag: from an event topic, time gaps, a done signal (pure windows + one cheap scan)."""
+
+from __future__ import annotations
+
+from bagport.segment.events import event_from_message, parse_event_text
+from bagport.segment.scan import SegmentedBag, segment_bag, segment_request, segments_bags
+from bagport.segment.windows import (
+    EXCLUDED_LABELS,
+    EpisodeWindow,
+    Event,
+    EventKind,
+    Segmentation,
+    done_edges_ns,
+    drop_short,
+    split_at_done,
+    split_at_gaps,
+    windows_from_events,
+)
+
+__all__ = [
+    "EXCLUDED_LABELS",
+    "EpisodeWindow",
+    "Event",
+    "EventKind",
+    "SegmentedBag",
+    "Segmentation",
+    "done_edges_ns",
+    "drop_short",
+    "event_from_message",
+    "parse_event_text",
+    "segment_bag",
+    "segment_request",
+    "segments_bags",
+    "split_at_done",
+    "split_at_gaps",
+    "windows_from_events",
+]

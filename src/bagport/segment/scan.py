@@ -1,0 +1,106 @@
+"""Split a bag into episode requests: one cheap pass over the event, done-signal (and, for gaps,
+the contract) topics; only event and done messages are deserialised."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from bagport.bags import BagReader, open_bag
+from bagport.contract import ContractPlan, parse_contract
+from bagport.contract.model import EpisodesOptions
+from bagport.decode import field_at
+from bagport.episode.request import EpisodeRequest
+from bagport.errors import DecodeError
+from bagport.segment.events import event_from_message
+from bagport.segment.windows import (
+    EpisodeWindow,
+    Event,
+    Segmentation,
+    done_edges_ns,
+    drop_short,
+    split_at_done,
+    split_at_gaps,
+    windows_from_events,
+)
+
+__all__ = ["SegmentedBag", "segment_bag", "segment_request", "segments_bags"]
+
+
+@dataclass(frozen=True, slots=True)
+class SegmentedBag:
+    """The episode requests of one bag, and what segmentation left out (with the reason)."""
+
+    requests: tuple[EpisodeRequest, ...]
+    ignored: tuple[str, ...] = ()
+
+
+def segments_bags(plan: ContractPlan) -> bool:
+    """Whether the contract asks for episodes inside bags (else one bag is one episode)."""
+    options = plan.contract.episodes
+    return options is not None and any(
+        (options.events is not None, options.gap_s is not None, options.done_signal is not None)
+    )
+
+
+def segment_bag(reader: BagReader, options: EpisodesOptions, stream_topics: tuple[str, ...]) -> Segmentation:
+    """The episode windows of an open bag under the contract's ``episodes`` options."""
+    info = reader.info
+    events_spec, done_spec = options.events, options.done_signal
+    gap_topics = frozenset(stream_topics) if options.gap_s is not None else frozenset()
+    topics = set(gap_topics)
+    for spec in (events_spec, done_spec):
+        if spec is not None and info.topic(spec.topic) is not None:
+            topics.add(spec.topic)
+    events: list[Event] = []
+    unknown: list[str] = []
+    done_ns: list[int] = []
+    done_values: list[float] = []
+    stamps: list[int] = []
+    for message in reader.messages(tuple(sorted(topics))):
+        t_ns = message.log_time_ns
+        if message.topic in gap_topics:
+            stamps.append(t_ns)
+        try:
+            if events_spec is not None and message.topic == events_spec.topic:
+                found = event_from_message(message.msg(), t_ns, events_spec)
+                if isinstance(found, Event):
+                    events.append(found)
+                else:
+                    unknown.append(f"{(t_ns - info.start_ns) / 1e9:.3f} s: {found[:60]!r}")
+            if done_spec is not None and message.topic == done_spec.topic:
+                done_ns.append(t_ns)
+                done_values.append(float(field_at(message.msg(), done_spec.field or "data", done_spec.topic)))
+        except (DecodeError, TypeError, ValueError) as err:
+            located = err if isinstance(err, DecodeError) else DecodeError(str(err), topic=message.topic)
+            raise located.located(uri=info.uri, topic=message.topic, t_ns=t_ns) from err
+    if events_spec is not None:
+        segmentation = windows_from_events(events, info.start_ns, info.end_ns)
+    else:
+        segmentation = Segmentation((EpisodeWindow(info.start_ns, info.end_ns, ended_by="bag end"),))
+    if unknown:
+        ignored = (*segmentation.ignored, f"{len(unknown)} message(s) naming no event, first at {unknown[0]}")
+        segmentation = Segmentation(segmentation.windows, ignored)
+    if options.gap_s is not None:
+        segmentation = split_at_gaps(segmentation, np.asarray(stamps, dtype=np.int64), options.gap_s)
+    if done_spec is not None:
+        segmentation = split_at_done(segmentation, done_edges_ns(done_ns, done_values))
+    return drop_short(segmentation, options.min_duration_s, info.start_ns)
+
+
+def segment_request(request: EpisodeRequest) -> SegmentedBag:
+    """One request per episode of the request's bag; the request itself when the contract does not
+    segment bags or the manifest entry gives an explicit window."""
+    plan = parse_contract(request.contract_text, request.contract_name)
+    options = plan.contract.episodes
+    if options is None or not segments_bags(plan) or request.has_window:
+        return SegmentedBag((request,))
+    stream_topics = tuple(dict.fromkeys(src.topic for src in plan.sources))
+    with open_bag(request.bag_uri) as reader:
+        segmentation = segment_bag(reader, options, stream_topics)
+    requests = tuple(
+        request.for_window(k, w.start_ns, w.end_ns, w.label, w.note)
+        for k, w in enumerate(segmentation.windows)
+    )
+    return SegmentedBag(requests, segmentation.ignored)

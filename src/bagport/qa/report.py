@@ -166,6 +166,13 @@ def _checks_table(entry: QAEntry) -> str:
     return html
 
 
+def _segment(entry: QAEntry) -> str:
+    """``#n`` and the label of one of several episodes in a bag."""
+    if entry.segment is None:
+        return ""
+    return f"#{entry.segment}" + (f" ({escape(entry.label)})" if entry.label else "")
+
+
 def render_report(entries: Sequence[QAEntry], dataset: dict[str, Any]) -> str:
     """The whole report as one HTML string."""
     kept = sum(e.episode_index is not None for e in entries)
@@ -177,7 +184,7 @@ def render_report(entries: Sequence[QAEntry], dataset: dict[str, Any]) -> str:
         brief = entry.brief()
         index = "excluded" if entry.episode_index is None else str(entry.episode_index)
         rows.append(
-            f'<tr><td><a href="#ep{n}">{escape(entry.qa.bag_uri.rstrip("/").rsplit("/", 1)[-1])}</a></td>'
+            f'<tr><td><a href="#ep{n}">{escape(entry.name)}</a></td>'
             f'<td>{index}</td><td>{entry.qa.score:.2f}</td><td class="{entry.qa.verdict}">{entry.qa.verdict}</td>'
             f"<td>{escape(brief['reason'])}</td></tr>"
         )
@@ -189,7 +196,7 @@ def render_report(entries: Sequence[QAEntry], dataset: dict[str, Any]) -> str:
         body += _fidelity(qa.plots.get("fidelity", {}))
         sections.append(
             f'<details id="ep{n}"{" open" if qa.verdict != "pass" else ""}><summary>'
-            f'<span class="{qa.verdict}">{qa.verdict}</span> {escape(qa.bag_uri)} — score {qa.score:.2f}, '
+            f'<span class="{qa.verdict}">{qa.verdict}</span> {escape(qa.bag_uri)}{_segment(entry)} — score {qa.score:.2f}, '
             f"{qa.frames} frames, {qa.duration_s:.1f} s</summary>{body}</details>"
         )
     return (

@@ -128,6 +128,12 @@ class QAEntry:
     by_label: bool = False
     """Left out because of its label (failed / discarded), not by QA."""
 
+    @property
+    def name(self) -> str:
+        """The bag's file name, with ``#<segment>`` for one of several episodes in a bag."""
+        stem = self.qa.bag_uri.rstrip("/").rsplit("/", 1)[-1]
+        return stem if self.segment is None else f"{stem}#{self.segment}"
+
     def brief(self) -> dict[str, Any]:
         clips = self.qa.plots.get("fidelity", {}).values()
         psnrs = [c["psnr_min_db"] for c in clips if c.get("psnr_min_db") is not None]

@@ -127,6 +127,7 @@ def test_three_demonstrations_with_one_fail_give_two_episodes_and_one_excluded(
         (1, 2, "success"),
     ]
     assert set(pq.read_table(out / "meta/tasks.parquet").to_pandas().index) == {TASKS[0], TASKS[2]}
+    assert "session#1 (failed)" in (out / "meta/qa/report.html").read_text()
 
 
 def test_keep_failed_keeps_the_failed_demonstration_with_its_label_and_task(

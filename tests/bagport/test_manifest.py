@@ -56,6 +56,19 @@ def test_fsspec_uris(tmp_path: Path) -> None:
         pytest.param("bag:\n  - uri: x\n", r"line 1: bag: Extra inputs", id="typo-top"),
         pytest.param("bags:\n  - {uri: a.mcap}\n  - {url: b.mcap}\n", r"bags\[1\].*line 3", id="entry-field"),
         pytest.param("bags: [\n", r"not valid YAML", id="bad-yaml"),
+        pytest.param(
+            "bags:\n  - {uri: a.mcap, start_s: 1, start_ns: 5}\n",
+            r"bags\[0\].*start_s .* or start_ns",
+            id="two-starts",
+        ),
+        pytest.param(
+            "bags:\n  - {uri: a.mcap, start_s: 4, end_s: 2}\n",
+            r"ends \(2.0\) before it starts",
+            id="backwards",
+        ),
+        pytest.param(
+            "bags:\n  - {uri: a.mcap, end_s: -1}\n", r"end_s: Input should be greater than 0", id="negative"
+        ),
     ],
 )
 def test_manifest_errors_name_the_entry(tmp_path: Path, text: str, match: str) -> None:
@@ -68,6 +81,23 @@ def test_duplicate_bag_is_an_error(tmp_path: Path) -> None:
     _touch(tmp_path / "a.mcap")
     with pytest.raises(ManifestError, match=r"bags\[1\]: bag .* is listed twice"):
         parse_manifest("bags:\n  - uri: a.mcap\n  - uri: '*.mcap'\n", "m.yaml", base_dir=str(tmp_path))
+
+
+def test_a_bag_may_be_listed_once_per_window(tmp_path: Path) -> None:
+    _touch(tmp_path / "a.mcap")
+    text = (
+        "bags:\n  - {uri: a.mcap, end_s: 10}\n  - {uri: a.mcap, start_s: 10, task: second}\n  - uri: a.mcap\n"
+    )
+    manifest = parse_manifest(text, "m.yaml", base_dir=str(tmp_path))
+    assert [(b.window, b.task) for b in manifest.bags] == [
+        ({"end_s": 10.0}, None),
+        ({"start_s": 10.0}, "second"),
+        ({}, None),
+    ]
+    with pytest.raises(ManifestError, match=r"bags\[1\]: bag .* is listed twice \(also bags\[0\]\)"):
+        parse_manifest(
+            text.replace("start_s: 10, task: second", "end_s: 10"), "m.yaml", base_dir=str(tmp_path)
+        )
 
 
 def test_missing_manifest_file() -> None:

@@ -121,3 +121,18 @@ def test_a_crash_between_the_meta_renames_is_recovered(bags: Path, tmp_path: Pat
     assert not list(out.glob(".meta.old-*"))
     assert json.loads((out / "meta/info.json").read_text())["total_episodes"] == 2
     shutil.rmtree(out.with_name("ds.staging"), ignore_errors=True)
+
+
+def test_append_to_a_dataset_without_label_columns_keeps_one_episodes_schema(
+    bags: Path, tmp_path: Path
+) -> None:
+    import pyarrow.parquet as pq  # noqa: PLC0415
+
+    out = tmp_path / "ds"
+    _convert(bags, ["a"], out, append=True)
+    episodes_file = out / "meta/episodes/chunk-000/file-000.parquet"
+    older = pq.read_table(episodes_file).drop_columns(["label", "label_note"])  # as bagport wrote it before
+    pq.write_table(older, episodes_file)
+    assert _convert(bags, ["a", "b"], out, append=True) == 1
+    assert "label" not in pq.read_schema(out / "meta/episodes/chunk-000/file-001.parquet").names
+    assert validate_dataset(out, repo_id="test/append", decode_every=10).episodes == 2

@@ -7,7 +7,7 @@ import json
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-NS_PER_S = 1_000_000_000
+from bagport.align import NS_PER_S
 
 __all__ = ["EpisodeRequest", "episode_id_for"]
 

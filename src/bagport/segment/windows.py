@@ -24,6 +24,8 @@ from enum import StrEnum
 import numpy as np
 import numpy.typing as npt
 
+from bagport.align import NS_PER_S
+
 __all__ = [
     "EpisodeWindow",
     "Event",
@@ -35,8 +37,6 @@ __all__ = [
     "split_at_gaps",
     "windows_from_events",
 ]
-
-NS_PER_S = 1_000_000_000
 
 
 class EventKind(StrEnum):

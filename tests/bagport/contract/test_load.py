@@ -159,3 +159,29 @@ def test_contract_errors_name_line_field_and_fix(text: str, match: str) -> None:
 def test_missing_contract_file() -> None:
     with pytest.raises(ContractError, match="does not exist"):
         load_contract("/nonexistent/contract.yaml")
+
+
+def test_episodes_section_and_default_task_are_optional_extensions() -> None:
+    assert parse_contract(ROSETTA_README_EXAMPLE, "c.yaml").contract.episodes is None
+    text = ROSETTA_README_EXAMPLE + (
+        "default_task: fold the towel\n"
+        "episodes:\n"
+        "  events: {topic: /teleop/status, type: my_msgs/Status, field: status.code, note_field: status.why}\n"
+        "  gap_s: 2.5\n"
+        "  done_signal: {topic: /done}\n"
+    )
+    contract = parse_contract(text, "c.yaml").contract
+    assert contract.default_task == "fold the towel"
+    assert contract.episodes is not None and contract.episodes.events is not None
+    assert (contract.episodes.events.type, contract.episodes.events.field) == (
+        "my_msgs/msg/Status",
+        "status.code",
+    )
+    assert contract.episodes.gap_s == 2.5
+    assert (
+        contract.episodes.done_signal is not None
+        and contract.episodes.done_signal.type == "std_msgs/msg/Bool"
+    )
+    assert contract.episodes.min_duration_s == 1.0
+    with pytest.raises(ContractError, match=r"episodes.gap.*Fix: did you mean 'gap_s'"):
+        parse_contract(ROSETTA_README_EXAMPLE + "episodes: {gap: 2}\n", "c.yaml")

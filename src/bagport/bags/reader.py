@@ -20,6 +20,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags.detect import detect_storage
 from bagport.bags.message import BagMessage, HeaderLayout
+from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.errors import BagportError, BagReadError, TransientError
 from bagport.uris import is_local
@@ -36,6 +37,8 @@ class BagReader(Protocol):
     def info(self) -> BagInfo: ...
 
     def messages(self, topics: Sequence[str] | None = None) -> Iterator[BagMessage]: ...
+
+    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]: ...
 
     def close(self) -> None: ...
 
@@ -86,6 +89,7 @@ class RosbagsReader:
         self._cleanup = cleanup
         self._scratch = Path(tempfile.mkdtemp(prefix="bagport-link-"))
         paths = _reader_paths(path, storage, self._scratch)
+        self._paths, self._storage = paths, storage
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
             self._reader: Any = AnyReader(paths, default_typestore=get_typestore(store))
@@ -150,6 +154,12 @@ class RosbagsReader:
                 uri=self._uri,
                 fix="the bag is corrupt or truncated.",
             ) from err
+
+    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]:
+        """Per topic ``(log_ns, publish_ns)`` in log order; empty when the storage has no publish time."""
+        if self._storage is not Storage.MCAP:
+            return {}
+        return mcap_publish_times_ns(self._paths, topics, self._uri)
 
     def close(self) -> None:
         reader = getattr(self, "_reader", None)

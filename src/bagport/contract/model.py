@@ -92,6 +92,9 @@ class AlignOptions(_Strict):
     stamp: StampSource | None = None
     fill: Literal["fail", "hold", "zeros", "drop_frame"] = "fail"
     """What a frame without a valid message gets; never silent (recorded in provenance)."""
+    clock_offset_ms: float = 0.0
+    """How far this source's stamps run ahead of the other streams' (another machine's clock):
+    the source is sampled at ``tick + clock_offset_ms``.  QA's ``time.clock_offset_ms`` measures it."""
 
 
 class ObservationEntry(_Strict):

@@ -44,7 +44,7 @@ class SourceSpec:
     decoder: str | None
     fill: str = "fail"
     offset_ns: int = 0
-    """The source is sampled at ``tick + offset_ns`` (``action_offset_ms`` on actions, else 0)."""
+    """The source is sampled at ``tick + offset_ns``: ``action_offset_ms`` on actions plus ``align.clock_offset_ms``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -111,7 +111,7 @@ def _source(
         resize_hw=(resize[0], resize[1]) if resize else None,
         decoder=entry.decoder,
         fill=align.fill if align else "fail",
-        offset_ns=offset_ns,
+        offset_ns=offset_ns + (round(align.clock_offset_ms * 1_000_000) if align else 0),
     )
 
 

@@ -36,7 +36,9 @@ def rewrite_publish_times(file: Path, publish_ns: Iterable[tuple[str, int, int]]
             sid: writer.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()
         }
         channel_ids = {
-            cid: writer.register_channel(c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), c.metadata)
+            cid: writer.register_channel(
+                c.topic, c.message_encoding, schema_ids.get(c.schema_id, 0), c.metadata
+            )
             for cid, c in summary.channels.items()
         }
         for _, channel, message in reader.iter_messages(log_time_order=False):

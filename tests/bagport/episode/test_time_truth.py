@@ -14,7 +14,7 @@ import pytest
 from bagport.dataset import write_dataset
 from bagport.dataset.validate import video_backend
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
-from bagport.staging import PROVENANCE_FILE, QA_FILE, EpisodeSummary
+from bagport.staging import QA_FILE, EpisodeSummary
 from bagport.synth import (
     CameraSpec,
     EpisodeSpec,
@@ -133,11 +133,14 @@ def test_lerobot_loaded_dataset_matches_the_truth_within_each_strategys_toleranc
         assert abs(float(item["timestamp"]) - k / FPS) < 1e-6
         # interpolate, on the arm's clock corrected by clock_offset_ms: the state at the true tick time
         errors["state"] = max(
-            errors["state"], float(np.abs(item["observation.state"].numpy() - truth.joint_position(tick)).max())
+            errors["state"],
+            float(np.abs(item["observation.state"].numpy() - truth.joint_position(tick)).max()),
         )
         # hold: the newest sample captured at or before the tick, never one from the future
         held = joint_capture[np.searchsorted(joint_capture, tick, side="right") - 1]
-        np.testing.assert_allclose(item["observation.velocity"].numpy(), truth.joint_velocity(held), atol=1e-5)
+        np.testing.assert_allclose(
+            item["observation.velocity"].numpy(), truth.joint_velocity(held), atol=1e-5
+        )
         # the action at tick t is the command published at t + action_offset_ms (publish = capture + lag)
         errors["action"] = max(
             errors["action"],
@@ -173,7 +176,9 @@ def test_dropout_and_clock_offset_show_up_in_qa_not_as_silent_frozen_frames(
     filled = checks[("time.filled_frames", "observation.images.front@/front/image_raw")]
     # 300 ms without images, the first 40 ms of it still within tol_ms: ~8 frames held, and said so
     assert filled["verdict"] == "warn" and 6 <= filled["value"] <= 9
-    assert checks[("time.filled_frames", "observation.images.wrist@/wrist/image_raw/compressed")]["value"] == 0
+    assert (
+        checks[("time.filled_frames", "observation.images.wrist@/wrist/image_raw/compressed")]["value"] == 0
+    )
     offset = checks[("time.clock_offset_ms", "/joint_states")]
     assert offset["verdict"] == "warn" and abs(offset["value"] - (AHEAD_MS - 2.0)) < 0.5  # minus 2 ms latency
     prov = pq.read_table(out / "meta/provenance/chunk-000/file-000.parquet").to_pylist()

@@ -49,5 +49,5 @@ def rewrite_publish_times(file: Path, publish_ns: Iterable[tuple[str, int, int]]
             )
         for record in reader.iter_metadata():
             writer.add_metadata(record.name, record.metadata)
-        writer.finish()
+        writer.finish()  # type: ignore[no-untyped-call]
     scratch.replace(file)

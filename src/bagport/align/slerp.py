@@ -41,16 +41,20 @@ def slerp(q0: FloatArray, q1: FloatArray, weight: FloatArray | float) -> FloatAr
     """Spherical interpolation of unit quaternions (..., 4), along the shortest path; normalised output.
 
     ``q`` and ``-q`` are the same rotation: ``q1`` is flipped when that is shorter.  The inputs are
-    normalised first (recorded quaternions drift off unit length).  Nearly equal inputs blend linearly.
+    normalised first (recorded quaternions drift off unit length).  Nearly equal inputs blend linearly;
+    an all-zero input (an ``Imu`` without orientation estimate) blends linearly, unnormalised.
     """
-    a = q0 / np.linalg.norm(q0, axis=-1, keepdims=True)
-    b = q1 / np.linalg.norm(q1, axis=-1, keepdims=True)
+    w = np.asarray(weight, dtype=np.float64)
+    if w.ndim < q0.ndim:
+        w = w[..., None]
+    n0 = np.linalg.norm(q0, axis=-1, keepdims=True)
+    n1 = np.linalg.norm(q1, axis=-1, keepdims=True)
+    degenerate = (n0 == 0) | (n1 == 0)
+    a = q0 / np.where(degenerate, 1.0, n0)
+    b = q1 / np.where(degenerate, 1.0, n1)
     dot = np.sum(a * b, axis=-1, keepdims=True)
     b = np.where(dot < 0, -b, b)
     dot = np.abs(dot)
-    w = np.asarray(weight, dtype=np.float64)
-    if w.ndim < a.ndim:
-        w = w[..., None]
     theta = np.arccos(np.clip(dot, -1.0, 1.0))
     sin_theta = np.sin(theta)
     parallel = dot > _NEARLY_PARALLEL
@@ -58,7 +62,8 @@ def slerp(q0: FloatArray, q1: FloatArray, weight: FloatArray | float) -> FloatAr
     s0 = np.where(parallel, 1.0 - w, np.sin((1.0 - w) * theta) / safe)
     s1 = np.where(parallel, w, np.sin(w * theta) / safe)
     out: FloatArray = s0 * a + s1 * b
-    unit: FloatArray = out / np.linalg.norm(out, axis=-1, keepdims=True)
+    norm = np.linalg.norm(out, axis=-1, keepdims=True)
+    unit: FloatArray = np.where(degenerate, (1.0 - w) * q0 + w * q1, out / np.where(norm == 0, 1.0, norm))
     return unit
 
 

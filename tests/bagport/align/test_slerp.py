@@ -73,3 +73,11 @@ def test_blend_slerps_the_quaternion_and_interpolates_the_rest_linearly() -> Non
     np.testing.assert_allclose(out[:3], [0.25, 1.5, 2.0])
     np.testing.assert_allclose(out[3:], _rotation(axis, 0.5), atol=1e-12)
     np.testing.assert_allclose(blend(lo, hi, 0.25), 0.75 * lo + 0.25 * hi)
+
+
+def test_an_all_zero_quaternion_blends_linearly_instead_of_nan() -> None:
+    """Imu messages without an orientation estimate carry (0, 0, 0, 0)."""
+    zero = np.zeros(4)
+    np.testing.assert_array_equal(slerp(zero, zero, 0.3), zero)
+    unit = np.array([0.0, 0.0, 0.0, 1.0])
+    np.testing.assert_allclose(slerp(zero, unit, 0.25), 0.25 * unit)

@@ -4,6 +4,7 @@ slerp of quaternions, and deterministic handling of disordered stamps."""
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -202,7 +203,10 @@ AXIS = np.array([0.3, -0.5, 0.8])
 OMEGA = 3.0  # rad/s
 
 
-def _write_pose_bag(path: Path, rate_hz: float, duration_s: float) -> npt.NDArray[np.int64]:
+def _write_pose_bag(
+    path: Path, rate_hz: float, duration_s: float, header_ns: Callable[[int], int] = lambda t: t
+) -> npt.NDArray[np.int64]:
+    """``/pose`` rotating at ``OMEGA`` about ``AXIS``; logged 1 ms after capture, header from ``header_ns``."""
     store = get_typestore(Stores.ROS2_HUMBLE)
     types: Any = store.types
     start = 1_700_000_000 * NS
@@ -213,9 +217,11 @@ def _write_pose_bag(path: Path, rate_hz: float, duration_s: float) -> npt.NDArra
     for stamp in stamps.tolist():
         t = (stamp - start) / NS
         x, y, z, w = _rotation(AXIS, np.array(OMEGA * t)).tolist()
+        header = header_ns(stamp)
         msg = types["geometry_msgs/msg/PoseStamped"](
             header=types["std_msgs/msg/Header"](
-                stamp=types["builtin_interfaces/msg/Time"](sec=stamp // NS, nanosec=stamp % NS), frame_id="w"
+                stamp=types["builtin_interfaces/msg/Time"](sec=header // NS, nanosec=header % NS),
+                frame_id="w",
             ),
             pose=types["geometry_msgs/msg/Pose"](
                 position=types["geometry_msgs/msg/Point"](x=2.0 * t, y=-t, z=0.5),
@@ -255,6 +261,32 @@ observations:
         :, None
     ] * _rotation(AXIS, OMEGA * (lo + 0.1))
     assert np.abs(linear - truth).max() > 1e-3
+
+
+POSE_CONTRACT = """\
+robot_type: r
+fps: 30
+observations:
+  - key: observation.pose
+    topic: /pose
+    type: geometry_msgs/msg/PoseStamped
+"""
+
+
+@pytest.mark.parametrize(
+    "header_ns", [lambda t: 0, lambda t: 1_700_000_000 * NS], ids=["zero-stamps", "constant-stamp"]
+)
+def test_untrustworthy_header_stamps_fall_back_to_receive_time(
+    tmp_path: Path, header_ns: Callable[[int], int]
+) -> None:
+    stamps = _write_pose_bag(tmp_path / "pose", 10.0, 1.0, header_ns)
+    summary = _convert(tmp_path / "pose", tmp_path / "st", POSE_CONTRACT)
+    assert summary.stamp_sources == {"observation.pose@/pose": "receive"}
+    prov = pq.read_table(Path(summary.dir_uri) / PROVENANCE_FILE).to_pylist()
+    assert all(r["stamp_used"] == "receive" and r["source_log_ns"] - 1_000_000 in stamps for r in prov)
+    explicit = POSE_CONTRACT + "    align: {stamp: header}\n"
+    with pytest.raises(AlignmentError, match=r"align\.stamp is 'header' .* no usable header stamps"):
+        _convert(tmp_path / "pose", tmp_path / "st2", explicit)
 
 
 def test_disordered_stamps_are_counted_and_handled_deterministically(tmp_path: Path) -> None:

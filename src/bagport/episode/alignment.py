@@ -2,7 +2,7 @@
 
 Missing values are handled by each source's ``align.fill`` policy (``fail`` by default), never
 silently; the per-source report (alignment error, held / interpolated / filled / dropped frames)
-goes into the episode summary and the provenance log.
+goes into the episode summary, the provenance log and the QA record (:func:`bagport.qa.alignment_checks`).
 """
 
 from __future__ import annotations

@@ -43,6 +43,8 @@ class SourceSpec:
     resize_hw: tuple[int, int] | None
     decoder: str | None
     fill: str = "fail"
+    depth_range_m: tuple[float, float] | None = None
+    """``image.depth_range_m``: the metres a depth camera's codes span (``None``: LeRobot's default)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -88,7 +90,8 @@ def _source(
     else:
         topic, msgtype = entry.topic, entry.type
     align = entry.align
-    resize = entry.image.resize if isinstance(entry, ObservationEntry) and entry.image else None
+    image = entry.image if isinstance(entry, ObservationEntry) else None
+    resize = image.resize if image else None
     return SourceSpec(
         key=entry.key,
         section=section,
@@ -101,6 +104,7 @@ def _source(
         resize_hw=(resize[0], resize[1]) if resize else None,
         decoder=entry.decoder,
         fill=align.fill if align else "fail",
+        depth_range_m=image.depth_range_m if image else None,
     )
 
 

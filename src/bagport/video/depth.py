@@ -45,10 +45,13 @@ DEPTH_ENCODER = EncoderSettings(
     pix_fmt=DEPTH_PIX_FMT,
     g=2,
     crf=30,
-    preset=None,
+    preset="ultrafast",
     extra_options={"x265-params": "lossless=1"},
 )
-"""LeRobot 0.6's ``DepthEncoderConfig`` defaults: HEVC (x265) lossless, 12-bit grey, g=2."""
+"""LeRobot 0.6's ``DepthEncoderConfig`` defaults (HEVC/x265 lossless, 12-bit grey, g=2) except the
+x265 preset: ``ultrafast`` instead of x265's default ``medium``. Lossless either way (the same
+codes decode); on 640x480 depth ``medium`` took 424 ms a frame and ``ultrafast`` 57 ms, for files
+7% larger. The preset is recorded in ``info`` (``video.preset``) as LeRobot records it."""
 
 
 @dataclass(frozen=True, slots=True)

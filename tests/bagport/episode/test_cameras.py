@@ -17,10 +17,12 @@ import pytest
 import simplejpeg
 import yaml
 
+from bagport.contract import parse_contract
 from bagport.dataset import write_dataset
 from bagport.dataset.validate import validate_dataset, video_backend
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
-from bagport.errors import DecodeError
+from bagport.errors import ContractError, DecodeError
+from bagport.feature_table import describe_features
 from bagport.qa import EpisodeQA
 from bagport.staging import QA_FILE, EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, render_frame, write_episode_bag
@@ -212,3 +214,44 @@ def test_a_colour_topic_with_depth_options_is_refused(tmp_path: Path) -> None:
     )
     with pytest.raises(DecodeError, match="depth_range_m is set but /front/image_raw carries colour images"):
         _convert(tmp_path, EpisodeSpec(duration_s=0.3, cameras=(cam,)), contract)
+
+
+@pytest.mark.slow
+def test_depth_stats_merge_exactly_when_appending(tmp_path: Path) -> None:
+    cams = (CameraSpec("depth", "raw", "32FC1", height=16, width=24),)
+    summaries = []
+    for seed, duration_s in ((1, 0.3), (2, 0.5)):
+        spec = EpisodeSpec(
+            duration_s=duration_s, cameras=cams, seed=seed, start_ns=1_700_000_000 * NS + seed * NS
+        )
+        summaries.append(_convert(tmp_path / f"ep{seed}", spec, _contract(cams)))
+    write_dataset(summaries[:1], str(tmp_path / "appended"), robot_type="r")
+    write_dataset(summaries[1:], str(tmp_path / "appended"), robot_type="r", append=True)
+    write_dataset(summaries, str(tmp_path / "at_once"), robot_type="r")
+    key = f"observation.images.{cams[0].name}"
+    appended = json.loads((tmp_path / "appended/meta/stats.json").read_text())[key]
+    at_once = json.loads((tmp_path / "at_once/meta/stats.json").read_text())[key]
+    assert appended["count"] == at_once["count"] == [sum(s.frames for s in summaries)]
+    for stat in ("min", "max", "q01", "q50", "q99"):
+        assert appended[stat] == at_once[stat]
+    assert appended["mean"][0][0][0] == pytest.approx(at_once["mean"][0][0][0], rel=1e-12)
+    assert 0.3 < at_once["q50"][0][0][0] < 6.5
+
+
+def test_contract_check_shows_depth_cameras_with_one_channel(
+    converted: tuple[Path, EpisodeSummary, GroundTruth],
+) -> None:
+    _, summary, truth = converted
+    rows = {
+        r.key: r for r in describe_features(parse_contract(_contract(truth.spec.cameras)), summary.bag_uri)
+    }
+    assert rows[f"observation.images.{_name('32FC1', 'compressed_depth')}"].shape == (H, W, 1)
+    assert rows[f"observation.images.{_name('bayer_rggb8')}"].shape == (H, W, 3)
+
+
+def test_an_empty_depth_range_is_a_contract_error() -> None:
+    cam = CameraSpec("depth", "raw", "16UC1")
+    bad = yaml.safe_load(_contract((cam,)))
+    bad["observations"][1]["image"] = {"depth_range_m": [3.0, 1.0]}
+    with pytest.raises(ContractError, match=r"depth_range_m \[3.0, 1.0\] must be \[min, max\] metres"):
+        parse_contract(yaml.safe_dump(bad), "c.yaml")

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 from bagport.bags import open_bag
 from bagport.contract import ContractPlan, FeatureKind
-from bagport.decode import decode_image, make_extractor, resize_rgb
+from bagport.decode import decode_image, image_channels, make_extractor, resize_image
 from bagport.episode.checks import check_bag_fits
 from bagport.errors import DecodeError
 
@@ -59,8 +59,8 @@ def describe_features(plan: ContractPlan, bag_uri: str | None = None) -> list[Fe
                 except DecodeError as err:
                     raise err.located(uri=bag_uri or "", topic=src.topic, t_ns=0) from err
                 if src.resize_hw:
-                    rgb = resize_rgb(rgb, *src.resize_hw)
-                shape = (int(rgb.shape[0]), int(rgb.shape[1]), 3)
+                    rgb = resize_image(rgb, *src.resize_hw)
+                shape = (int(rgb.shape[0]), int(rgb.shape[1]), image_channels(rgb))
             rows.append(FeatureRow(feature.key, "video", shape, ("height", "width", "channels"), sources))
             continue
         names: list[str] = []

@@ -81,9 +81,18 @@ class Selector(_Strict):
     names: tuple[str, ...] = ()
 
 
+def _check_depth_range(bounds: tuple[float, float] | None) -> tuple[float, float] | None:
+    if bounds is not None and not 0 <= bounds[0] < bounds[1]:
+        raise ValueError(f"depth_range_m {list(bounds)} must be [min, max] metres with 0 <= min < max")
+    return bounds
+
+
 class ImageOptions(_Strict):
     resize: tuple[PositiveInt, PositiveInt] | None = None
     """Target ``[height, width]``."""
+    depth_range_m: Annotated[tuple[float, float] | None, AfterValidator(_check_depth_range)] = None
+    """Depth cameras only: ``[min, max]`` metres the 12-bit depth codes span (LeRobot's
+    ``depth_min``/``depth_max``; default ``[0.01, 10.0]``)."""
 
 
 class AlignOptions(_Strict):

@@ -45,6 +45,8 @@ class SourceSpec:
     fill: str = "fail"
     offset_ns: int = 0
     """The source is sampled at ``tick + offset_ns``: ``action_offset_ms`` on actions plus ``align.clock_offset_ms``."""
+    depth_range_m: tuple[float, float] | None = None
+    """``image.depth_range_m``: the metres a depth camera's codes span (``None``: LeRobot's default)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -98,7 +100,8 @@ def _source(
     else:
         topic, msgtype = entry.topic, entry.type
     align = entry.align
-    resize = entry.image.resize if isinstance(entry, ObservationEntry) and entry.image else None
+    image = entry.image if isinstance(entry, ObservationEntry) else None
+    resize = image.resize if image else None
     return SourceSpec(
         key=entry.key,
         section=section,
@@ -112,6 +115,7 @@ def _source(
         decoder=entry.decoder,
         fill=align.fill if align else "fail",
         offset_ns=offset_ns + (round(align.clock_offset_ms * 1_000_000) if align else 0),
+        depth_range_m=image.depth_range_m if image else None,
     )
 
 

@@ -37,6 +37,7 @@ from bagport.stats import (
     stats_from_json,
     vector_stats,
 )
+from bagport.video.depth import histogram_levels
 
 __all__ = ["DatasetLimits", "EpisodeStats", "build_info", "load_episode_stats", "write_meta"]
 
@@ -175,6 +176,7 @@ def write_meta(
 
     merged: dict[str, Any] = {}
     histograms: dict[str, list[int]] = {}
+    levels = {f.key: histogram_levels(f.video_info) for f in features if f.video_info is not None}
     for key in stat_keys:
         parts = [ep.stats[key] for ep in episode_stats]
         if base is not None:
@@ -183,7 +185,7 @@ def write_meta(
             hists = [ep.histograms[key] for ep in episode_stats]
             if base is not None:
                 hists.append(base.histograms[key])
-            value = merge_histograms(hists, [int(p["count"][0]) for p in parts])
+            value = merge_histograms(hists, [int(p["count"][0]) for p in parts], levels.get(key))
             histograms[key] = np.sum(np.stack(hists), axis=0).tolist()
         else:
             value = merge_feature_stats(parts)

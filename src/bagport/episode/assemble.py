@@ -18,7 +18,7 @@ import numpy.typing as npt
 from bagport.align import QuaternionGroup, Selection, blend, quaternion_groups
 from bagport.bags import BagMessage, BagReader
 from bagport.contract.plan import FeatureKind, FeatureSpec, SourceSpec
-from bagport.decode import VectorExtractor, decode_image, make_extractor, resize_rgb
+from bagport.decode import VectorExtractor, decode_image, is_depth, make_extractor, resize_image
 from bagport.episode.timeline import TopicTimeline
 from bagport.errors import AlignmentError, DecodeError
 
@@ -45,6 +45,8 @@ class AlignedSource:
     last_use: dict[int, int] = field(default_factory=dict)
     needed: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
     required: Int64Array = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    depth: bool = False
+    """A camera whose messages decoded as depth maps (its zeros fill is then invalid depth)."""
 
     def prepare(self) -> None:
         self.needed = np.zeros(self.timeline.count, dtype=np.bool_)
@@ -74,6 +76,8 @@ class AlignedSource:
 
     def _zeros(self) -> Any:
         if self.kind is FeatureKind.VIDEO and self.src.resize_hw is not None:
+            if self.depth:
+                return np.full(self.src.resize_hw, np.nan, dtype=np.float32)
             return np.zeros((*self.src.resize_hw, 3), dtype=np.uint8)
         return np.zeros(max(1, len(self.src.names)), dtype=np.float64)
 
@@ -83,16 +87,18 @@ class Frame:
     index: int
     tick_ns: int
     vectors: dict[str, npt.NDArray[np.float64]]
-    images: dict[str, npt.NDArray[np.uint8]]
+    images: dict[str, npt.NDArray[Any]]
+    """RGB uint8 (H, W, 3), or depth float32 (H, W) metres with NaN for invalid."""
 
 
 def _decode(source: AlignedSource, message: BagMessage) -> Any:
     msg = message.msg()
     if source.kind is FeatureKind.VIDEO:
-        rgb = decode_image(msg, source.src.msgtype)
+        image = decode_image(msg, source.src.msgtype)
+        source.depth = is_depth(image)
         if source.src.resize_hw is not None:
-            rgb = resize_rgb(rgb, *source.src.resize_hw)
-        return rgb
+            image = resize_image(image, *source.src.resize_hw)
+        return image
     if source.extractor is None:
         source.extractor = make_extractor(source.src, msg)
         source.quaternions = quaternion_groups(source.extractor.names)
@@ -160,7 +166,7 @@ def _frame(
     by_key: dict[str, list[AlignedSource]],
 ) -> Frame:
     vectors: dict[str, npt.NDArray[np.float64]] = {}
-    images: dict[str, npt.NDArray[np.uint8]] = {}
+    images: dict[str, npt.NDArray[Any]] = {}
     for feature in features:
         parts = [source.value(k) for source in by_key[feature.key]]
         if feature.kind is FeatureKind.VIDEO:

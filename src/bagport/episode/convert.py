@@ -18,6 +18,7 @@ from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
+from bagport.episode.cameras import CameraSink
 from bagport.episode.checks import bag_fingerprint, check_bag_fits
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
@@ -40,8 +41,8 @@ from bagport.staging import (
     staged_path,
     write_json,
 )
-from bagport.stats import ImageStatsAccumulator, stats_to_json, vector_stats
-from bagport.video import EncoderSettings, StreamingEncoder
+from bagport.stats import stats_to_json, vector_stats
+from bagport.video import EncoderSettings
 
 __all__ = ["convert_episode"]
 
@@ -59,27 +60,27 @@ class _EpisodeSinks:
         vector_dtypes = {f.key: f.dtype for f in self.plan.features if f.kind is FeatureKind.VECTOR}
         (self.workdir / "videos").mkdir(parents=True, exist_ok=True)
         self.frames = FrameTableWriter(self.workdir / FRAMES_FILE, self.plan.fps, vector_dtypes)
-        self.encoders: dict[str, StreamingEncoder] = {}
-        self.image_stats: dict[str, ImageStatsAccumulator] = {}
+        self.cameras: dict[str, CameraSink] = {}
         self.widths: dict[str, int] = {}
+        self._camera_sources = {
+            f.key: f.sources[0] for f in self.plan.features if f.kind is FeatureKind.VIDEO
+        }
 
     def on_frame(self, frame: Frame) -> None:
-        for key, rgb in frame.images.items():
-            encoder = self.encoders.get(key)
-            if encoder is None:
-                encoder = StreamingEncoder(
+        for key, image in frame.images.items():
+            camera = self.cameras.get(key)
+            if camera is None:
+                camera = CameraSink(
                     self.workdir / "videos" / f"{key}.mp4",
-                    fps=self.plan.fps,
-                    width=rgb.shape[1],
-                    height=rgb.shape[0],
-                    settings=self.settings,
+                    self._camera_sources[key],
+                    image,
+                    self.plan.fps,
+                    self.settings,
+                    self.fidelity,
+                    self.monitor,
                 )
-                self.encoders[key] = encoder
-                self.image_stats[key] = ImageStatsAccumulator()
-            encoder.write(rgb)
-            self.fidelity.record(key, rgb)
-            self.image_stats[key].update(rgb)
-            self.monitor.add_image(frame.index, key, rgb)
+                self.cameras[key] = camera
+            camera.write(frame.index, image)
         for key, vec in frame.vectors.items():
             width = self.widths.setdefault(key, vec.shape[0])
             if vec.shape[0] != width:
@@ -94,7 +95,7 @@ class _EpisodeSinks:
     def close(self) -> dict[str, Any]:
         """Close every writer; returns video clip infos by key."""
         self.frames.close()
-        return {key: enc.close() for key, enc in self.encoders.items()}
+        return {key: camera.close() for key, camera in self.cameras.items()}
 
 
 def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
@@ -137,14 +138,15 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 extra_plots={"fidelity": video_plots} if video_plots else {}, alignment=alignment,
             )  # fmt: skip
             (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
-            features = _staged_features(plan, sources, sinks, clips, settings)
+            features = _staged_features(plan, sources, sinks, clips)
             stats: dict[str, Any] = {}
             table = pq.read_table(
                 workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
             )
             for name in table.column_names:
                 stats[name] = stats_to_json(vector_stats(vector_column(table, name)))
-            for key, acc in sinks.image_stats.items():
+            for key, camera in sinks.cameras.items():
+                acc = camera.stats
                 stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
             (workdir / STATS_FILE).write_text(json.dumps(stats))
             target = episode_dir(request.staging_uri, request.episode_id)
@@ -220,7 +222,6 @@ def _staged_features(
     sources: list[AlignedSource],
     sinks: _EpisodeSinks,
     clips: dict[str, Any],
-    settings: EncoderSettings,
 ) -> tuple[StagedFeature, ...]:
     out = []
     for feature in plan.features:
@@ -228,18 +229,9 @@ def _staged_features(
         topics = tuple(s.src.topic for s in mine)
         if feature.kind is FeatureKind.VIDEO:
             clip = clips[feature.key]
-            video_info = {
-                "video.height": clip.height,
-                "video.width": clip.width,
-                "video.codec": clip.codec,
-                "video.pix_fmt": clip.pix_fmt,
-                "video.fps": plan.fps,
-                "video.channels": 3,
-                "has_audio": False,
-                **settings.to_info(),
-                "is_depth_map": False,
-            }
-            shape = (clip.height, clip.width, 3)
+            camera = sinks.cameras[feature.key]
+            video_info = camera.video_info(clip, plan.fps)
+            shape = (clip.height, clip.width, camera.channels)
             out.append(
                 StagedFeature(
                     feature.key, "video", shape, ("height", "width", "channels"), video_info, topics

@@ -39,9 +39,14 @@ def merge_feature_stats(parts: Sequence[FeatureStats]) -> FeatureStats:
     return merged
 
 
-def merge_histograms(hists: Sequence[npt.NDArray[np.int64]], frames: Sequence[int]) -> FeatureStats:
-    """Exact image stats over several episodes from their pixel histograms."""
-    return histogram_stats(np.sum(np.stack(hists), axis=0), int(sum(frames)))
+def merge_histograms(
+    hists: Sequence[npt.NDArray[np.int64]],
+    frames: Sequence[int],
+    levels: npt.NDArray[np.float64] | None = None,
+) -> FeatureStats:
+    """Exact image stats over several episodes from their pixel histograms (``levels``: see
+    :func:`~bagport.stats.numeric.histogram_stats`)."""
+    return histogram_stats(np.sum(np.stack(hists), axis=0), int(sum(frames)), levels)
 
 
 def stats_to_json(stats: FeatureStats) -> dict[str, Any]:

@@ -25,8 +25,10 @@ from bagport.errors import TransientError
 
 __all__ = ["RemoteBag", "RemotePath", "TransferStats"]
 
-READ_BLOCK_BYTES = 64 * 1024
-"""Smallest ranged read: small record reads (summary, headers) are batched into blocks this big."""
+MIN_BLOCK_BYTES = 8 * 1024
+"""Smallest ranged read: a small read after a seek (a record header) fetches this much."""
+MAX_BLOCK_BYTES = 1024 * 1024
+"""Sequential small reads (the summary, record by record) double the block up to this size."""
 
 
 @dataclass(slots=True)
@@ -86,8 +88,9 @@ class _SpilledRanges:
                 ends.append(hi)
         self._starts, self._ends = starts, ends
 
-    def read(self, start: int, end: int) -> bytes:
-        for lo, hi in self._gaps(start, end):
+    def read(self, start: int, end: int, fetch_end: int) -> bytes:
+        """Bytes ``[start, end)``; missing bytes up to ``fetch_end`` are fetched with them."""
+        for lo, hi in self._gaps(start, max(end, min(fetch_end, self.size))):
             data = self._bag.fetch(self._path, lo, hi)
             self._spill.seek(lo)
             self._spill.write(data)
@@ -105,6 +108,8 @@ class _RangedFile(io.RawIOBase):
     def __init__(self, ranges: _SpilledRanges) -> None:
         self._ranges = ranges
         self._pos = 0
+        self._last_end = -1
+        self._block = MIN_BLOCK_BYTES
 
     def readable(self) -> bool:
         return True
@@ -123,9 +128,13 @@ class _RangedFile(io.RawIOBase):
     def readinto(self, buffer: Any) -> int:
         view = memoryview(buffer).cast("B")
         count = max(0, min(len(view), self._ranges.size - self._pos))
-        if count:
-            view[:count] = self._ranges.read(self._pos, self._pos + count)
-            self._pos += count
+        if not count:
+            return 0
+        sequential = self._pos == self._last_end
+        self._block = min(2 * self._block, MAX_BLOCK_BYTES) if sequential else MIN_BLOCK_BYTES
+        end = self._pos + count
+        view[:count] = self._ranges.read(self._pos, end, self._pos + self._block)
+        self._pos = self._last_end = end
         return count
 
 
@@ -231,4 +240,4 @@ class RemotePath:
         if mode not in ("rb", "r"):
             raise PermissionError(f"{self.path}: remote bags are opened read-only")
         ranges = self.bag.ranges(self.path, self.stat().st_size)
-        return io.BufferedReader(_RangedFile(ranges), buffer_size=READ_BLOCK_BYTES)
+        return io.BufferedReader(_RangedFile(ranges), buffer_size=4096)

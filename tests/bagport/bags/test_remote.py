@@ -8,13 +8,16 @@ from pathlib import Path
 from typing import Any, Literal
 
 import numpy as np
+import pyarrow.parquet as pq
 import pytest
 import s3fs
 from mcap.writer import CompressionType, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags import BagMessage, open_bag
+from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 from tests.s3 import moto_s3
 
 NS = 1_000_000_000
@@ -162,3 +165,29 @@ def test_rosbag2_folders_on_s3(s3: s3fs.S3FileSystem, tmp_path: Path, storage: s
         assert reader.info.custom_data == custom
         assert _values(reader.messages([EpisodeSpec.JOINT_TOPIC])) == expected
         assert reader.transfer.bytes_read > 0
+
+
+def test_episode_from_s3_records_how_the_bag_was_read(s3: s3fs.S3FileSystem, tmp_path: Path) -> None:
+    local = tmp_path / "ep"
+    write_episode_bag(local, "mcap", EpisodeSpec(duration_s=0.5, seed=5))
+    uri = _upload(s3, local, "convert/ep")
+    text = SAMPLE_CONTRACT.read_text()
+    summaries = []
+    for bag in (str(local), uri):
+        request = EpisodeRequest(
+            episode_id=episode_id_for(bag, text, FAST_CODEC),
+            bag_uri=bag,
+            manifest_entry=0,
+            staging_uri=str(tmp_path / "staging"),
+            contract_text=text,
+            contract_name="contract.yaml",
+            encoder=FAST_CODEC,
+        )
+        summaries.append(convert_episode(request))
+    here, remote = summaries
+    size = sum(p.stat().st_size for p in local.iterdir())
+    assert here.bag_read == {"access": "local", "bytes_read": 0, "requests": 0, "warnings": []}
+    assert remote.bag_read["access"] == "ranged"
+    assert 0 < remote.bag_read["bytes_read"] <= size  # three passes, each byte fetched once
+    frames = [pq.read_table(Path(s.dir_uri) / "frames.parquet") for s in summaries]
+    assert frames[0].equals(frames[1])

@@ -3,7 +3,6 @@ events and types that cannot be loaded, short reads, read-only SQLite, unindexed
 
 from __future__ import annotations
 
-import os
 import re
 import shutil
 import sqlite3
@@ -269,4 +268,4 @@ def test_truncated_ros1_bag_says_to_reindex(tmp_path: Path) -> None:
     path.write_bytes(source.read_bytes()[: source.stat().st_size * 2 // 3])
     with pytest.raises(BagReadError, match=r"cut\.bag.*`rosbag reindex`"), open_bag(str(path)) as reader:
         list(reader.messages())
-    assert os.listdir(tmp_path) == ["cut.bag"]
+    assert [p.name for p in tmp_path.iterdir()] == ["cut.bag"]

@@ -101,6 +101,9 @@ class RosbagsReader:
                 uri=uri,
                 fix="the bag is corrupt or truncated.",
             ) from err
+        except BaseException:  # TransientError from a ranged read, KeyboardInterrupt
+            self.close()
+            raise
         counts: dict[str, tuple[str, int]] = {}
         for conn in self._reader.connections:
             msgtype, count = counts.get(conn.topic, (conn.msgtype, 0))

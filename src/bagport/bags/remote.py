@@ -14,6 +14,7 @@ from __future__ import annotations
 import bisect
 import io
 import os
+import shutil
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -172,9 +173,7 @@ class RemoteBag:
         for ranges in self._files.values():
             ranges.close()
         self._files.clear()
-        for item in self.scratch.iterdir():
-            item.unlink()
-        self.scratch.rmdir()
+        shutil.rmtree(self.scratch, ignore_errors=True)
 
 
 @dataclass(frozen=True)

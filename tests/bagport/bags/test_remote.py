@@ -16,6 +16,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags import BagMessage, open_bag
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.errors import TransientError
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 from tests.s3 import moto_s3
@@ -191,3 +192,24 @@ def test_episode_from_s3_records_how_the_bag_was_read(s3: s3fs.S3FileSystem, tmp
     assert 0 < remote.bag_read["bytes_read"] <= size  # three passes, each byte fetched once
     frames = [pq.read_table(Path(s.dir_uri) / "frames.parquet") for s in summaries]
     assert frames[0].equals(frames[1])
+
+
+def test_a_remote_read_that_fails_in_transit_is_transient_and_leaves_no_scratch(
+    s3: s3fs.S3FileSystem, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    local = tmp_path / "flaky.mcap"
+    write_camera_and_joints(local, "topic")
+    uri = _upload(s3, local, "flaky.mcap")
+    reader = open_bag(uri)
+    scratch = reader._remote.scratch  # type: ignore[attr-defined]
+    assert scratch.is_dir()
+
+    def refuse(*args: object, **kwargs: object) -> bytes:
+        raise ConnectionError("connection reset by peer")
+
+    monkeypatch.setattr(reader._remote.fs, "cat_file", refuse)  # type: ignore[attr-defined]
+    with pytest.raises(TransientError, match=r"s3://bags/flaky\.mcap: ranged read of .* failed.*try again"):
+        list(reader.messages([JOINTS]))
+    reader.close()
+    reader.close()
+    assert not scratch.exists()

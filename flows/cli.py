@@ -29,7 +29,9 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
             print(format_bag_info(reader.info))
             read = reader.transfer
             if read.access != "local":
-                print(f"Read:              {read.access}, {read.bytes_read} bytes in {read.requests} requests")
+                print(
+                    f"Read:              {read.access}, {read.bytes_read} bytes in {read.requests} requests"
+                )
     return 0
 
 

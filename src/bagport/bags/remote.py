@@ -161,6 +161,11 @@ class RemoteBag:
             ) from err
         self.stats.bytes_read += len(data)
         self.stats.requests += 1
+        if len(data) != end - start:
+            raise TransientError(
+                f"{self.uri}: ranged read of {path} [{start}, {end}) returned {len(data)} bytes "
+                "(the object changed or the store cut the response); try again"
+            )
         return data
 
     def ranges(self, path: str, size: int) -> _SpilledRanges:

@@ -3,18 +3,24 @@ for, each byte fetched at most once; bytes read are measured against the file si
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterator
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any, Literal
 
+import fsspec
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
 import s3fs
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from mcap.writer import CompressionType, Writer
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags import BagMessage, open_bag
+from bagport.bags.remote import RemoteBag, RemotePath
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.errors import TransientError
 from bagport.synth import EpisodeSpec, write_episode_bag
@@ -213,3 +219,39 @@ def test_a_remote_read_that_fails_in_transit_is_transient_and_leaves_no_scratch(
     reader.close()
     reader.close()
     assert not scratch.exists()
+
+
+@settings(max_examples=60, deadline=None)
+@given(
+    reads=st.lists(
+        st.tuples(st.integers(0, 70_000), st.integers(0, 40_000), st.sampled_from(["read", "peek"])),
+        min_size=1,
+        max_size=25,
+    )
+)
+def test_ranged_files_return_the_bytes_asked_for_and_fetch_each_byte_once(
+    reads: list[tuple[int, int, str]],
+) -> None:
+    content = np.random.default_rng(1).integers(0, 256, 65_537, dtype=np.uint8).tobytes()
+    fs = fsspec.filesystem("memory")
+    fs.pipe("/ranged/blob.bin", content)
+    fetched: list[tuple[int, int]] = []
+    cat_file = fs.cat_file
+
+    def recording_cat_file(path: str, start: int, end: int) -> bytes:
+        fetched.append((start, end))
+        return bytes(cat_file(path, start=start, end=end))
+
+    bag = RemoteBag(fs, "memory://ranged/blob.bin")
+    bag.fs = SimpleNamespace(cat_file=recording_cat_file, size=fs.size)
+    try:
+        with RemotePath(bag, "/ranged/blob.bin").open() as handle:
+            for offset, size, how in reads:
+                handle.seek(offset)
+                got = handle.read(size) if how == "read" else handle.read(min(size, 8))
+                assert got == content[offset : offset + (size if how == "read" else min(size, 8))]
+        fetched.sort()
+        assert all(a_end <= b_start for (_, a_end), (b_start, _) in itertools.pairwise(fetched))
+        assert bag.stats.bytes_read == sum(end - start for start, end in fetched) <= len(content)
+    finally:
+        bag.close()

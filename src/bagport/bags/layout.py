@@ -35,6 +35,8 @@ class ReadPlan:
     """What rosbags' AnyReader opens (``Path`` or :class:`RemotePath`)."""
     files: list[BagPath]
     """Every file of the bag (for names and sizes)."""
+    data_files: list[BagPath]
+    """The files holding messages, in split order (for readers other than rosbags)."""
     warnings: list[str] = field(default_factory=list)
     message_compression: bool = False
     """Payloads are zstd-compressed one by one and rosbags does not know (metadata bypassed)."""
@@ -90,14 +92,14 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Path, uri: str) -> Read
     suffix = SUFFIX[storage]
     if path.is_file():
         opened = path if path.suffix == suffix else _alias(path, f"bag{suffix}", scratch)
-        return ReadPlan([opened], [path])
+        return ReadPlan([opened], [path], [path])
     present = _data_files(path)
     metadata = _metadata(path, uri)
     if metadata is not None:
         problem = _metadata_problem(metadata, present)
         if problem is None:
             folder = _alias(path, "bag", scratch) if path.suffix == ".bag" else path
-            return ReadPlan([folder], [*present, path / "metadata.yaml"])
+            return ReadPlan([folder], [*present, path / "metadata.yaml"], present)
         mode = str(metadata.get("compression_mode") or "").lower()
         if mode == "file":
             raise BagReadError(
@@ -108,9 +110,14 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Path, uri: str) -> Read
         usable = _usable(present, storage, uri)
         warning = f"{problem}; reading the {len(usable)} {storage} file(s) present instead"
         return ReadPlan(
-            list(usable), [*present, path / "metadata.yaml"], [warning], message_compression=mode == "message"
+            list(usable),
+            [*present, path / "metadata.yaml"],
+            usable,
+            [warning],
+            message_compression=mode == "message",
         )
-    return ReadPlan(list(_usable(present, storage, uri)), list(present))
+    usable = _usable(present, storage, uri)
+    return ReadPlan(list(usable), list(present), usable)
 
 
 def _usable(present: list[BagPath], storage: Storage, uri: str) -> list[BagPath]:

@@ -22,6 +22,7 @@ from rosbags.typesys import Stores, get_typestore
 from bagport.bags.detect import detect_storage
 from bagport.bags.layout import BagPath, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
+from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
 from bagport.bags.typeload import TolerantAnyReader, is_service_event
@@ -44,6 +45,8 @@ class BagReader(Protocol):
     def transfer(self) -> TransferStats: ...
 
     def messages(self, topics: Sequence[str] | None = None) -> Iterator[BagMessage]: ...
+
+    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]: ...
 
     def close(self) -> None: ...
 
@@ -87,6 +90,7 @@ class RosbagsReader:
             self.close()
             raise
         self._decompress = plan.message_compression
+        self._mcap_files = plan.data_files if storage is Storage.MCAP else []
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
             self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=get_typestore(store))
@@ -206,6 +210,12 @@ class RosbagsReader:
                     fix="the bag is truncated or its index is stale: reindex it "
                     "(`ros2 bag reindex` / `rosbag reindex`).",
                 )
+
+    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]:
+        """Per topic ``(log_ns, publish_ns)`` in log order; empty when the storage has no publish time."""
+        if not self._mcap_files:
+            return {}
+        return mcap_publish_times_ns(self._mcap_files, topics, self._uri)
 
     def close(self) -> None:
         reader = getattr(self, "_reader", None)

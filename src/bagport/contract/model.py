@@ -68,7 +68,7 @@ FeatureKey = Annotated[str, AfterValidator(_check_key)]
 Topic = Annotated[str, AfterValidator(_check_topic)]
 MsgType = Annotated[str, AfterValidator(_check_msgtype)]
 DecoderRef = Annotated[str, AfterValidator(_check_decoder)]
-StampSource = Literal["header", "receive"]
+StampSource = Literal["header", "receive", "publish"]
 
 
 class _Strict(BaseModel):
@@ -92,6 +92,9 @@ class AlignOptions(_Strict):
     stamp: StampSource | None = None
     fill: Literal["fail", "hold", "zeros", "drop_frame"] = "fail"
     """What a frame without a valid message gets; never silent (recorded in provenance)."""
+    clock_offset_ms: float = 0.0
+    """How far this source's stamps run ahead of the other streams' (another machine's clock):
+    the source is sampled at ``tick + clock_offset_ms``.  QA's ``time.clock_offset_ms`` measures it."""
 
 
 class ObservationEntry(_Strict):
@@ -160,3 +163,9 @@ class Contract(_Strict):
     info: Any = None
     timestamp_source: StampSource | None = None
     max_duration_s: PositiveFloat | None = None
+    clock: str | None = None
+    """A feature key: one frame per message of that stream instead of the fixed grid (see README)."""
+    action_offset_ms: float | None = None
+    """The action at tick t is the command at t + offset (command-to-execution delay); may be negative."""
+    action_offset_frames: int | None = None
+    """The same offset in frames (``action_offset_ms = frames * 1000 / fps``)."""

@@ -43,6 +43,8 @@ class SourceSpec:
     resize_hw: tuple[int, int] | None
     decoder: str | None
     fill: str = "fail"
+    offset_ns: int = 0
+    """The source is sampled at ``tick + offset_ns``: ``action_offset_ms`` on actions plus ``align.clock_offset_ms``."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +73,11 @@ class ContractPlan:
         return self.contract.robot_type
 
     @property
+    def clock(self) -> str | None:
+        """The feature key whose messages are the frames (``clock:``), or ``None`` for the fixed grid."""
+        return self.contract.clock
+
+    @property
     def sources(self) -> tuple[SourceSpec, ...]:
         return tuple(src for feature in self.features for src in feature.sources)
 
@@ -81,7 +88,10 @@ class ContractPlan:
 
 
 def _source(
-    entry: ObservationEntry | ActionEntry | ScalarEntry, section: str, default_stamp: StampSource | None
+    entry: ObservationEntry | ActionEntry | ScalarEntry,
+    section: str,
+    default_stamp: StampSource | None,
+    offset_ns: int = 0,
 ) -> SourceSpec:
     if isinstance(entry, ActionEntry):
         topic, msgtype = entry.publish.topic, entry.publish.type
@@ -101,7 +111,22 @@ def _source(
         resize_hw=(resize[0], resize[1]) if resize else None,
         decoder=entry.decoder,
         fill=align.fill if align else "fail",
+        offset_ns=offset_ns + (round(align.clock_offset_ms * 1_000_000) if align else 0),
     )
+
+
+def action_offset_ns(contract: Contract, source_name: str) -> int:
+    """``action_offset_ms`` or ``action_offset_frames`` in integer nanoseconds (0 when unset)."""
+    if contract.action_offset_ms is not None and contract.action_offset_frames is not None:
+        raise ContractError(
+            "sets both action_offset_ms and action_offset_frames",
+            file=source_name,
+            field="action_offset_frames",
+            fix="keep one of them.",
+        )
+    if contract.action_offset_frames is not None:
+        return contract.action_offset_frames * 1_000_000_000 // contract.fps
+    return round((contract.action_offset_ms or 0.0) * 1_000_000)
 
 
 _SCALAR_TYPES = frozenset(f"std_msgs/msg/{name}" for name in ("Float32", "Float64", "Int32", "Int64", "Bool"))
@@ -144,6 +169,7 @@ def _check_align(src: SourceSpec, section: str, source_name: str) -> None:
 def compile_contract(contract: Contract, source_name: str = "contract") -> ContractPlan:
     """Group entries by key (declaration order) and check what can be checked without a bag."""
     entries: list[tuple[ObservationEntry | ActionEntry | ScalarEntry, str, StampSource | None]] = []
+    offset_ns = action_offset_ns(contract, source_name)
     entries += [(e, "observations", None) for e in contract.observations]
     entries += [(e, "actions", contract.timestamp_source) for e in contract.actions]
     for section in ("rewards", "signals", "complementary_data"):
@@ -157,7 +183,7 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
 
     grouped: dict[str, list[tuple[SourceSpec, str | None]]] = {}
     for entry, section, stamp in entries:
-        src = _source(entry, section, stamp)
+        src = _source(entry, section, stamp, offset_ns if section == "actions" else 0)
         _check_align(src, section, source_name)
         grouped.setdefault(src.key, []).append((src, entry.dtype))
 
@@ -200,6 +226,13 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
                 fix=f"use one of {sorted(_NUMERIC_DTYPES)}.",
             )
         features.append(FeatureSpec(key, FeatureKind.VECTOR, dtype, sources))
+    if contract.clock is not None and contract.clock not in grouped:
+        raise ContractError(
+            f"clock {contract.clock!r} is not a feature key of this contract",
+            file=source_name,
+            field="clock",
+            fix=f"use one of {sorted(grouped)}, or remove 'clock' for the fixed grid.",
+        )
     return ContractPlan(
         contract=contract, source_name=source_name, features=tuple(features), task_topics=contract.tasks
     )

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from bagport.align import Selection
+from bagport.align import QuaternionGroup, Selection, blend, quaternion_groups
 from bagport.bags import BagMessage, BagReader
 from bagport.contract.plan import FeatureKind, FeatureSpec, SourceSpec
 from bagport.decode import VectorExtractor, decode_image, make_extractor, resize_rgb
@@ -39,6 +39,8 @@ class AlignedSource:
     filled: npt.NDArray[np.bool_]
     """Ticks whose value comes from ``align.fill`` (held past a gap, or zeros)."""
     extractor: VectorExtractor | None = None
+    quaternions: tuple[QuaternionGroup, ...] = ()
+    """``x, y, z, w`` index groups of the extractor's names: slerped, not blended linearly."""
     cache: dict[int, Any] = field(default_factory=dict)
     last_use: dict[int, int] = field(default_factory=dict)
     needed: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
@@ -67,7 +69,7 @@ class AlignedSource:
         if self.selection.hi is not None and self.selection.weight is not None:
             weight = float(self.selection.weight[k])
             if weight > 0:
-                value = (1.0 - weight) * value + weight * self.cache[int(self.selection.hi[k])]
+                value = blend(value, self.cache[int(self.selection.hi[k])], weight, self.quaternions)
         return value
 
     def _zeros(self) -> Any:
@@ -93,6 +95,7 @@ def _decode(source: AlignedSource, message: BagMessage) -> Any:
         return rgb
     if source.extractor is None:
         source.extractor = make_extractor(source.src, msg)
+        source.quaternions = quaternion_groups(source.extractor.names)
     return source.extractor(msg)
 
 

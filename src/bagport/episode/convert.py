@@ -24,7 +24,7 @@ from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
-from bagport.episode.timeline import scan_timeline
+from bagport.episode.timeline import scan_plan_timeline
 from bagport.errors import DecodeError
 from bagport.qa import EpisodeQA, QAConfig, ValueMonitor
 from bagport.staging import (
@@ -112,7 +112,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     with open_bag(request.bag_uri) as reader:
         info = reader.info
         check_bag_fits(info, plan)
-        timeline = scan_timeline(reader, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics])
+        timeline = scan_plan_timeline(reader, plan)
         sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
         frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
@@ -134,7 +134,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             ]
             qa = assess_episode(
                 request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,
-                extra_plots={"fidelity": video_plots} if video_plots else {},
+                extra_plots={"fidelity": video_plots} if video_plots else {}, alignment=alignment,
             )  # fmt: skip
             (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
             features = _staged_features(plan, sources, sinks, clips, settings)

@@ -14,9 +14,10 @@ import numpy as np
 import numpy.typing as npt
 
 from bagport.bags import BagReader
+from bagport.contract import ContractPlan
 from bagport.errors import BagReadError
 
-__all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_timeline"]
+__all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_plan_timeline", "scan_timeline"]
 
 Int64Array = npt.NDArray[np.int64]
 
@@ -28,6 +29,8 @@ class TopicTimeline:
     header_ns: Int64Array | None
     """``None`` when the type has no header, any stamp is zero, or the stamps never advance
     (publishers that stamp every message with one constant time)."""
+    publish_ns: Int64Array | None = None
+    """MCAP publish times, read only for sources with ``stamp: publish``; ``None`` otherwise."""
 
     @property
     def count(self) -> int:
@@ -38,6 +41,10 @@ class TopicTimeline:
             if self.header_ns is None:
                 raise ValueError(f"{self.topic} has no usable header stamps")
             return self.header_ns
+        if source == "publish":
+            if self.publish_ns is None:
+                raise ValueError(f"{self.topic} has no publish times")
+            return self.publish_ns
         return self.log_ns
 
 
@@ -53,7 +60,27 @@ class Timeline:
     tasks: tuple[TaskMessage, ...]
 
 
-def scan_timeline(reader: BagReader, topics: Iterable[str], task_topics: Iterable[str]) -> Timeline:
+def _publish_times(
+    reader: BagReader, log: dict[str, list[int]], topics: tuple[str, ...]
+) -> dict[str, Int64Array]:
+    """MCAP publish times of ``topics``, checked message by message against the log times read."""
+    out: dict[str, Int64Array] = {}
+    for topic, (log_ns, publish_ns) in reader.publish_times_ns(topics).items():
+        if not np.array_equal(log_ns, np.asarray(log[topic], dtype=np.int64)):
+            raise BagReadError(
+                "the publish times read with the mcap library do not line up with the log times",
+                uri=reader.info.uri,
+                topic=topic,
+                fix="use 'align: {stamp: receive}' or 'stamp: header' for this topic.",
+            )
+        out[topic] = publish_ns
+    return out
+
+
+def scan_timeline(
+    reader: BagReader, topics: Iterable[str], task_topics: Iterable[str], publish_topics: Iterable[str] = ()
+) -> Timeline:
+    """Stamps of every feature topic; MCAP publish times too for ``publish_topics`` (``stamp: publish``)."""
     feature_topics = tuple(topics)
     task_set = frozenset(task_topics)
     log: dict[str, list[int]] = {t: [] for t in feature_topics}
@@ -75,6 +102,7 @@ def scan_timeline(reader: BagReader, topics: Iterable[str], task_topics: Iterabl
                 topic=topic,
                 fix="the bag is truncated or its index is stale: reindex it (`ros2 bag reindex` / `rosbag reindex`).",
             )
+    publish = _publish_times(reader, log, tuple(dict.fromkeys(publish_topics)))
     result: dict[str, TopicTimeline] = {}
     for topic in feature_topics:
         stamps = header[topic]
@@ -85,5 +113,16 @@ def scan_timeline(reader: BagReader, topics: Iterable[str], task_topics: Iterabl
             topic=topic,
             log_ns=np.asarray(log[topic], dtype=np.int64),
             header_ns=np.asarray(stamps, dtype=np.int64) if usable else None,
+            publish_ns=publish.get(topic),
         )
     return Timeline(topics=result, tasks=tuple(tasks))
+
+
+def scan_plan_timeline(reader: BagReader, plan: ContractPlan) -> Timeline:
+    """:func:`scan_timeline` of every topic a contract reads (publish times where it asks for them)."""
+    return scan_timeline(
+        reader,
+        [s.topic for s in plan.sources],
+        [t.topic for t in plan.task_topics],
+        [s.topic for s in plan.sources if s.stamp == "publish"],
+    )

@@ -53,6 +53,9 @@ class EpisodeSpec:
     task: str | None = "pick up the red cube"
     seed: int = 0
     faults: Faults = field(default_factory=Faults)
+    publish_lag_ns: int | None = None
+    """MCAP only: ``publish_time`` = capture time + this (a recorder that stores send times);
+    ``None``: ``publish_time`` = log time, as rosbags writes it."""
 
     JOINT_TOPIC = "/joint_states"
     ACTION_TOPIC = "/cmd"

@@ -20,6 +20,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from bagport.errors import BagportError
 from bagport.synth.pixels import render_frame
+from bagport.synth.publish import rewrite_publish_times
 from bagport.synth.spec import CameraSpec, EpisodeSpec
 from bagport.synth.truth import GroundTruth
 
@@ -217,6 +218,10 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
             writer.write(conns[topic], log_ns, msgs.serialize(msg, types[topic]))
     finally:
         writer.close()
+    if storage == "mcap" and spec.publish_lag_ns is not None:
+        lag_ns = spec.publish_lag_ns
+        for file in sorted(path.glob("*.mcap")):
+            rewrite_publish_times(file, ((t, log, stamp + lag_ns) for log, t, _, stamp in _events(truth)))
     return truth
 
 

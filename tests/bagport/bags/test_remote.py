@@ -127,6 +127,10 @@ def test_joint_topic_of_per_topic_chunks_is_read_without_the_camera(
         assert first_pass < 0.05 * size, (first_pass, size)
         assert _values(reader.messages([JOINTS])) == expected
         assert reader.transfer.bytes_read == first_pass  # a second pass fetches nothing again
+        log_ns, publish_ns = reader.publish_times_ns([JOINTS])[JOINTS]  # through the mcap library
+        assert log_ns.tolist() == publish_ns.tolist() == [t for _, t, _, _ in expected]
+        assert reader.transfer.bytes_read - first_pass < 1024  # the same chunks, already spilled
+        first_pass = reader.transfer.bytes_read
         frames = [m.msg().data.size for m in reader.messages([CAMERA])]
         assert frames == [240 * 320 * 3] * 30
         assert first_pass < reader.transfer.bytes_read <= size

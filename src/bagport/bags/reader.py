@@ -125,7 +125,10 @@ class RosbagsReader:
             message_count=message_count,
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
             custom_data=_custom_data(path),
-            warnings=tuple(plan.warnings),
+            warnings=(
+                *plan.warnings,
+                *(f"type {t} cannot be loaded: {why}" for t, why in sorted(self._reader.unloadable.items())),
+            ),
         )
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
         if remote is not None:

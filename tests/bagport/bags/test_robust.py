@@ -205,6 +205,10 @@ def test_a_type_that_cannot_be_loaded_fails_only_the_topics_that_use_it(tmp_path
     assert stale != metadata
     (folder / "metadata.yaml").write_text(stale)
     with open_bag(str(folder)) as reader:
+        assert reader.info.warnings == (
+            f"type {STRING} cannot be loaded: its definition hashes to "
+            f"{STORE.hash_rihs01(STRING)}, the bag records RIHS01_{'0' * 64}",
+        )
         assert [m.msg().data for m in reader.messages(["/b"])] == [True, False, True, False, True]
         assert {m.topic for m in reader.messages()} == {"/b"}
         with pytest.raises(

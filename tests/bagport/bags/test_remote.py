@@ -163,11 +163,20 @@ def test_inspecting_a_remote_mcap_reads_only_its_summary(s3: s3fs.S3FileSystem, 
         assert reader.transfer.requests <= 4
 
 
-@pytest.mark.parametrize(("storage", "access"), [("mcap", "ranged"), ("sqlite3", "download")])
-def test_rosbag2_folders_on_s3(s3: s3fs.S3FileSystem, tmp_path: Path, storage: str, access: str) -> None:
-    local = tmp_path / f"ep_{storage}"
+@pytest.mark.parametrize(
+    ("storage", "name", "access"),
+    [
+        ("mcap", "ep_mcap", "ranged"),
+        ("mcap", "named_like_ros1.bag", "ranged"),
+        ("sqlite3", "ep_db3", "download"),
+    ],
+)
+def test_rosbag2_folders_on_s3(
+    s3: s3fs.S3FileSystem, tmp_path: Path, storage: str, name: str, access: str
+) -> None:
+    local = tmp_path / name
     write_episode_bag(local, storage, EpisodeSpec(duration_s=0.5, seed=3))  # type: ignore[arg-type]
-    uri = _upload(s3, local, f"ep_{storage}")
+    uri = _upload(s3, local, name)
     with open_bag(str(local)) as reader:
         expected = _values(reader.messages([EpisodeSpec.JOINT_TOPIC]))
         custom = reader.info.custom_data

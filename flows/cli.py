@@ -27,6 +27,11 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     for uri in args.uri:
         with open_bag(uri) as reader:
             print(format_bag_info(reader.info))
+            read = reader.transfer
+            if read.access != "local":
+                print(
+                    f"Read:              {read.access}, {read.bytes_read} bytes in {read.requests} requests"
+                )
     return 0
 
 

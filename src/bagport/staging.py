@@ -81,6 +81,8 @@ class EpisodeSummary:
     qa: dict[str, Any] = field(default_factory=dict)
     """QA score, verdict and the checks that did not pass (the full record is ``qa.json``)."""
     qa_sha256: str = ""
+    bag_read: dict[str, Any] = field(default_factory=dict)
+    """How the bag was read: access (local, download, ranged), bytes_read, requests, warnings."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

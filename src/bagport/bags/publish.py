@@ -15,6 +15,7 @@ import numpy.typing as npt
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
+from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
 __all__ = ["mcap_publish_times_ns"]
@@ -22,21 +23,15 @@ __all__ = ["mcap_publish_times_ns"]
 Int64Array = npt.NDArray[np.int64]
 
 
-def _mcap_files(paths: Sequence[Path]) -> list[Path]:
-    files: list[Path] = []
-    for path in paths:
-        files += sorted(path.glob("*.mcap")) if path.is_dir() else [path]
-    return files
-
-
 def mcap_publish_times_ns(
-    paths: Sequence[Path], topics: Iterable[str], uri: str
+    files: Sequence[Path | RemotePath], topics: Iterable[str], uri: str
 ) -> dict[str, tuple[Int64Array, Int64Array]]:
-    """Per topic: ``(log_ns, publish_ns)`` sorted by log time (ties keep file order)."""
+    """Per topic: ``(log_ns, publish_ns)`` sorted by log time (ties keep file order), from the
+    bag's ``.mcap`` files (local, or remote and read through the same ranged reads and spill)."""
     wanted = tuple(topics)
     pairs: dict[str, list[tuple[int, int]]] = {t: [] for t in wanted}
     try:
-        for file in _mcap_files(paths):
+        for file in files:
             with file.open("rb") as handle:
                 for _, channel, message in make_reader(handle).iter_messages(topics=list(wanted)):
                     pairs[channel.topic].append((int(message.log_time), int(message.publish_time)))

@@ -175,6 +175,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 alignment=alignment,
                 qa=qa_brief(qa),
                 qa_sha256=request.qa_sha256,
+                bag_read={**reader.transfer.to_dict(), "warnings": list(info.warnings)},
             )
             _publish(workdir, target, summary)
         finally:

@@ -21,6 +21,7 @@ from rosbags.typesys import Stores, get_typestore
 from bagport.bags.detect import detect_storage
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.records import BagInfo, Storage, TopicInfo
+from bagport.bags.typesources import complete_typestore, parse_msg_definitions, undefined_type_error
 from bagport.errors import BagportError, BagReadError, TransientError
 from bagport.uris import is_local
 
@@ -38,6 +39,11 @@ class BagReader(Protocol):
     def messages(self, topics: Sequence[str] | None = None) -> Iterator[BagMessage]: ...
 
     def close(self) -> None: ...
+
+    @property
+    def undefined_types(self) -> dict[str, str]:
+        """``{topic: msgtype}`` of topics whose type no source defines (reading them fails)."""
+        ...
 
     def __enter__(self) -> BagReader: ...
 
@@ -81,15 +87,32 @@ def _reader_paths(path: Path, storage: Storage, scratch: Path) -> list[Path]:
 class RosbagsReader:
     """``BagReader`` over rosbags' AnyReader: rosbag2 (MCAP, SQLite) and ROS 1."""
 
-    def __init__(self, uri: str, path: Path, storage: Storage, cleanup: Path | None) -> None:
+    def __init__(
+        self,
+        uri: str,
+        path: Path,
+        storage: Storage,
+        cleanup: Path | None,
+        msg_definitions: Mapping[str, str] | None = None,
+    ) -> None:
         self._uri = uri
         self._cleanup = cleanup
         self._scratch = Path(tempfile.mkdtemp(prefix="bagport-link-"))
         paths = _reader_paths(path, storage, self._scratch)
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
+            extra = parse_msg_definitions(msg_definitions or {})
             self._reader: Any = AnyReader(paths, default_typestore=get_typestore(store))
             self._reader.open()
+            lacking = complete_typestore(
+                self._reader.typestore,
+                {c.msgtype for c in self._reader.connections},
+                extra,
+                get_typestore(store),
+            )
+        except BagportError:
+            self.close()
+            raise
         except _ROSBAGS_ERRORS as err:
             self.close()
             raise BagReadError(f"cannot be opened: {err}", uri=uri, fix=_fix_for(err)) from err
@@ -118,10 +141,15 @@ class RosbagsReader:
             custom_data=_custom_data(path),
         )
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
+        self._lacking = lacking
 
     @property
     def info(self) -> BagInfo:
         return self._info
+
+    @property
+    def undefined_types(self) -> dict[str, str]:
+        return {c.topic: c.msgtype for c in self._reader.connections if c.msgtype in self._lacking}
 
     def _header_layout(self, msgtype: str) -> str | None:
         fields = self._reader.typestore.fielddefs.get(msgtype)
@@ -135,6 +163,9 @@ class RosbagsReader:
         conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
         if not conns:
             return
+        for conn in conns:
+            if conn.msgtype in self._lacking:
+                raise undefined_type_error(self._uri, conn.topic, conn.msgtype, self._lacking[conn.msgtype])
         layouts = {c.msgtype: self._header_layout(c.msgtype) for c in conns}
         deserialize = self._reader.deserialize
         try:
@@ -209,12 +240,20 @@ def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | N
     return local, scratch
 
 
-def open_bag(uri: str, *, storage_options: Mapping[str, Any] | None = None) -> BagReader:
-    """Open a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag from any fsspec URI."""
+def open_bag(
+    uri: str,
+    *,
+    storage_options: Mapping[str, Any] | None = None,
+    msg_definitions: Mapping[str, str] | None = None,
+) -> BagReader:
+    """Open a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag from any fsspec URI.
+
+    ``msg_definitions`` (``{type name: .msg text}``, see :func:`bagport.bags.read_msg_path`) define
+    types the bag does not embed and no bundled type store has."""
     local, cleanup = _fetch(uri, storage_options or {})
     try:
         storage = detect_storage(local, uri)
-        return RosbagsReader(uri, local, storage, cleanup)
+        return RosbagsReader(uri, local, storage, cleanup, msg_definitions)
     except BagportError:
         if cleanup is not None:
             shutil.rmtree(cleanup, ignore_errors=True)

@@ -48,11 +48,11 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
         raise ContractError(
             problem.what, file=name, line=problem.line, field=problem.field, fix=problem.fix
         ) from err
-    plan = compile_contract(contract, name)
-    for feature in plan.features:
-        for src in feature.sources:
-            if src.decoder is not None:
-                resolve_decoder(src.decoder, where=f"{name} ({src.key} on {src.topic})")
+    plan = compile_contract(contract, name, source.line_of)
+    for src in plan.sources:
+        if src.decoder is not None:
+            field = f"{src.section}[key={src.key}].decoder"
+            resolve_decoder(src.decoder, file=name, line=src.line, field=field)
     return plan
 
 

@@ -79,6 +79,10 @@ class Selector(_Strict):
     """Which dimensions of a message make up the feature, in order."""
 
     names: tuple[str, ...] = ()
+    child_frame: str | None = None
+    """tf2_msgs/msg/TFMessage only: the transform whose ``child_frame_id`` is this frame."""
+    parent_frame: str | None = None
+    """tf2_msgs/msg/TFMessage only, optional: and whose ``header.frame_id`` is this frame."""
 
 
 class ImageOptions(_Strict):

@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
-from bagport.decode.custom import CustomDecoder, resolve_decoder
+from bagport.decode.custom import CustomDecoder, register_decoder, registered_decoder, resolve_decoder
 from bagport.decode.image import decode_image, resize_rgb
-from bagport.decode.vector import VectorExtractor, make_extractor
+from bagport.decode.paths import VectorExtractor
+from bagport.decode.tf import child_frames, find_transform, transform_stamp_ns
+from bagport.decode.vector import make_extractor
 
 __all__ = [
     "CustomDecoder",
     "VectorExtractor",
+    "child_frames",
     "decode_image",
+    "find_transform",
     "make_extractor",
+    "register_decoder",
+    "registered_decoder",
     "resize_rgb",
     "resolve_decoder",
+    "transform_stamp_ns",
 ]

@@ -109,10 +109,12 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     reusable = _reusable(request, stamp)
     if reusable is not None:
         return reusable
-    with open_bag(request.bag_uri) as reader:
+    with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as reader:
         info = reader.info
         check_bag_fits(info, plan)
-        timeline = scan_timeline(reader, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics])
+        timeline = scan_timeline(
+            reader, plan.streams(), [t.topic for t in plan.task_topics], plan.stream_filters()
+        )
         sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
         frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))

@@ -82,7 +82,7 @@ def parse_msg_definitions(definitions: Mapping[str, str], source: str = "--msg-p
             typs.update(get_types_from_msg(text, name))
         except (TypesysError, ValueError) as err:
             raise BagReadError(
-                f"the definition of {name} cannot be parsed ({err})",
+                f"the definition of {name} cannot be parsed ({' '.join(str(err).split())})",
                 uri=source,
                 fix=f"fix the file {name}.msg (ROS 2 .msg syntax).",
             ) from err

@@ -11,7 +11,16 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
+from pydantic import (
+    AfterValidator,
+    AliasChoices,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PositiveFloat,
+    PositiveInt,
+    StrictInt,
+)
 
 __all__ = [
     "ActionEntry",
@@ -149,7 +158,7 @@ class ScalarEntry(_Strict):
 
 class Contract(_Strict):
     robot_type: str = Field(validation_alias=AliasChoices("robot_type", "name"))
-    fps: PositiveInt = Field(default=30, validation_alias=AliasChoices("fps", "rate_hz"))
+    fps: StrictInt = Field(default=30, gt=0, validation_alias=AliasChoices("fps", "rate_hz"))
     observations: tuple[ObservationEntry, ...] = ()
     actions: tuple[ActionEntry, ...] = ()
     tasks: tuple[TaskEntry, ...] = ()

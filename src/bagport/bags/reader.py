@@ -102,14 +102,11 @@ class RosbagsReader:
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
             extra = parse_msg_definitions(msg_definitions or {})
-            self._reader: Any = AnyReader(paths, default_typestore=get_typestore(store))
+            bundled = get_typestore(store)
+            self._reader: Any = AnyReader(paths, default_typestore=bundled)
             self._reader.open()
-            lacking = complete_typestore(
-                self._reader.typestore,
-                {c.msgtype for c in self._reader.connections},
-                extra,
-                get_typestore(store),
-            )
+            msgtypes = {c.msgtype for c in self._reader.connections}
+            lacking = complete_typestore(self._reader.typestore, msgtypes, extra, bundled)
         except BagportError:
             self.close()
             raise

@@ -23,6 +23,7 @@ class RosType(StrEnum):
     JOY = "sensor_msgs/msg/Joy"
     JOINT_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
     TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+    MULTI_DOF_COMMAND = "control_msgs/msg/MultiDOFCommand"
 
 
 IMAGE_TYPES = frozenset({RosType.IMAGE.value, RosType.COMPRESSED_IMAGE.value})

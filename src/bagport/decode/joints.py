@@ -1,4 +1,5 @@
-"""Selecting joints by name: sensor_msgs/JointState and trajectory_msgs/JointTrajectory.
+"""Selecting joints by name: sensor_msgs/JointState, trajectory_msgs/JointTrajectory and
+control_msgs/MultiDOFCommand.
 
 Selector grammar (Rosetta's, extended to trajectories):
 
@@ -6,6 +7,8 @@ Selector grammar (Rosetta's, extended to trajectories):
   trajectories); a bare ``<joint>`` means its position.
 - JointTrajectory reads its first point unless the name starts with ``points[N].``
   (``points[-1].position.wrist`` is the last point).
+- MultiDOFCommand (``dof_names``, ``values``, ``values_dot``): ``<dof>`` or ``value.<dof>`` is its value,
+  ``value_dot.<dof>`` its rate; without a selector, every value.
 - JointTrajectory names with an index (``points[0].positions[2]``, ``positions[2]`` = first point)
   or starting with ``time_from_start`` / ``header`` are dot paths into the message.
 """
@@ -22,7 +25,7 @@ import numpy.typing as npt
 from bagport.decode.paths import Vector, VectorExtractor, resolve_path
 from bagport.errors import DecodeError
 
-__all__ = ["joint_state_extractor", "joint_trajectory_extractor"]
+__all__ = ["joint_state_extractor", "joint_trajectory_extractor", "multi_dof_extractor"]
 
 _STATE_FIELDS = {"position": "position", "velocity": "velocity", "effort": "effort"}
 _POINT_FIELDS = {
@@ -31,6 +34,7 @@ _POINT_FIELDS = {
     "acceleration": "accelerations",
     "effort": "effort",
 }
+_DOF_FIELDS = {"position": "values", "value": "values", "value_dot": "values_dot"}
 _POINT_PREFIX = re.compile(r"^points\[(-?\d+)\]\.")
 _POINT_PATH = re.compile(r"^(?:(?:positions|velocities|accelerations|effort)\[-?\d+\]|time_from_start\.\w+)$")
 
@@ -165,3 +169,16 @@ def joint_trajectory_extractor(topic: str, names: tuple[str, ...], first_msg: An
         return out
 
     return VectorExtractor(names, extract)
+
+
+def multi_dof_extractor(topic: str, names: tuple[str, ...], first_msg: Any) -> VectorExtractor:
+    """control_msgs/MultiDOFCommand by degree-of-freedom name; without names, every value."""
+    if not names:
+        names = tuple(f"value.{d}" for d in first_msg.dof_names)
+    selectors = tuple(_parse(n, _DOF_FIELDS) for n in names)
+
+    def values_of(msg: Any, _point: int, field: str) -> Any:
+        return getattr(msg, field)
+
+    by_name = _ByName(topic, "MultiDOFCommand", selectors, lambda m: tuple(m.dof_names), values_of)
+    return VectorExtractor(names, by_name)

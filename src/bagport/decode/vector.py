@@ -9,7 +9,7 @@ import numpy as np
 from bagport.contract.plan import SourceSpec
 from bagport.decode.custom import CustomDecoder, registered_decoder, resolve_decoder
 from bagport.decode.defaults import DEFAULT_FIELDS
-from bagport.decode.joints import joint_state_extractor, joint_trajectory_extractor
+from bagport.decode.joints import joint_state_extractor, joint_trajectory_extractor, multi_dof_extractor
 from bagport.decode.paths import Vector, VectorExtractor, paths_extractor
 from bagport.decode.tf import tf_extractor
 from bagport.errors import DecodeError
@@ -84,6 +84,8 @@ def make_extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
         return joint_state_extractor(src.topic, src.names, first_msg)
     if src.msgtype == RosType.JOINT_TRAJECTORY:
         return joint_trajectory_extractor(src.topic, src.names, first_msg)
+    if src.msgtype == RosType.MULTI_DOF_COMMAND:
+        return multi_dof_extractor(src.topic, src.names, first_msg)
     if src.msgtype == RosType.TF_MESSAGE and src.child_frame is not None:
         return tf_extractor(src.topic, src.names, src.child_frame, src.parent_frame)
     if src.names:

@@ -158,9 +158,10 @@ def _check_reads_gripper(bag: Path) -> None:
     assert [[float(m.gain[1]), m.mode, m.tip.z] for m in msgs] == _expected()
 
 
-def test_mcap_ros2msg_schema_and_ros1_connection_headers_need_nothing_else(tmp_path: Path) -> None:
+def test_mcap_schema_sqlite_definitions_and_ros1_headers_need_nothing_else(tmp_path: Path) -> None:
     store = _store()
     _check_reads_gripper(write_bag(tmp_path / "msg", "mcap", store, _messages(store)))
+    _check_reads_gripper(write_bag(tmp_path / "db", "sqlite3", store, _messages(store)))  # Iron+ table
     store1 = _store(ros1=True)
     _check_reads_gripper(write_bag(tmp_path / "one", "ros1", store1, _messages(store1, ros1=True)))
 

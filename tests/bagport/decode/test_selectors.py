@@ -170,3 +170,26 @@ def test_decoder_mistakes_are_explained() -> None:
         DecodeError, match=rf"decoder {__name__}:broken failed on a std_msgs/msg/Float64 message \(KeyError"
     ):
         make_extractor(_src("std_msgs/msg/Float64", decoder=f"{__name__}:broken"), msg)
+
+
+MULTI_DOF = "control_msgs/msg/MultiDOFCommand"
+MULTI_DOF_MSG = "string[] dof_names\nfloat64[] values\nfloat64[] values_dot\n"
+
+
+def test_multi_dof_command_by_dof_name() -> None:
+    from rosbags.typesys import get_types_from_msg  # noqa: PLC0415
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    store.register(
+        get_types_from_msg(MULTI_DOF_MSG, MULTI_DOF)
+    )  # not bundled: the bag or --msg-path gives it
+    cmd = store.types[MULTI_DOF]
+    msg = cmd(dof_names=["x", "yaw"], values=np.array([1.0, 2.0]), values_dot=np.array([0.1, 0.2]))
+    ext = make_extractor(_src(MULTI_DOF), msg)
+    assert ext.names == ("value.x", "value.yaw")
+    assert ext(msg).tolist() == [1.0, 2.0]
+    ext = make_extractor(_src(MULTI_DOF, ("value_dot.yaw", "x")), msg)
+    swapped = cmd(dof_names=["yaw", "x"], values=np.array([5.0, 4.0]), values_dot=np.array([0.5, 0.4]))
+    assert ext(swapped).tolist() == [0.5, 4.0]
+    with pytest.raises(DecodeError, match=r"joint\(s\) \['z'\] not in this MultiDOFCommand message"):
+        make_extractor(_src(MULTI_DOF, ("z",)), msg)(msg)

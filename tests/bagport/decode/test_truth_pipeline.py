@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from bagport.config import ConvertConfig
 from bagport.contract import parse_contract
@@ -22,6 +22,12 @@ from tests.bagport.decode.bagwriter import Stream, write_bag
 pytestmark = pytest.mark.slow
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
+# Not a bundled type: the MCAP bag embeds its definition, which is where the reader gets it.
+TS.register(
+    get_types_from_msg(
+        "string[] dof_names\nfloat64[] values\nfloat64[] values_dot\n", "control_msgs/msg/MultiDOFCommand"
+    )
+)
 T = TS.types
 FPS = 10
 FRAMES = 12
@@ -196,6 +202,15 @@ CASES: dict[str, Case] = {
         lambda k, t: None,  # written below: tool0 and camera transforms in separate messages
         "selector: {child_frame: tool0, parent_frame: base}",
         lambda k: _p(5 * k),
+    ),
+    "multi_dof": (
+        "/dof_cmd",
+        "control_msgs/msg/MultiDOFCommand",
+        lambda k, t: T["control_msgs/msg/MultiDOFCommand"](
+            dof_names=["x", "yaw"], values=np.array([k, -k / 2]), values_dot=np.array([0.1, 0.2])
+        ),
+        "selector: {names: [yaw, value_dot.x]}",
+        lambda k: [-k / 2, 0.1],
     ),
     "f32": (
         "/f32",

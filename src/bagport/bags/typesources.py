@@ -5,8 +5,8 @@ In order of precedence for a type a bag uses:
 1. the definitions the bag embeds (MCAP schemas in ``ros2msg`` or ``ros2idl``; the
    ``message_definitions`` table of rosbag2 SQLite bags from Iron on; ROS 1 connection
    headers), which rosbags' reader registers on open;
-2. the user's ``--msg-path`` folder of ``.msg`` files (``DIR/<pkg>/msg/<Type>.msg``);
-3. the bundled standard types (ROS 2 Humble, or ROS 1 Noetic for ROS 1 bags).
+2. the bundled standard types (ROS 2 Humble, or ROS 1 Noetic for ROS 1 bags);
+3. the user's ``--msg-path`` folder of ``.msg`` files (``DIR/<pkg>/msg/<Type>.msg``), for the rest.
 
 rosbag2's ``metadata.yaml`` carries only a hash of each type (``type_description_hash``),
 never the definition itself; rosbags checks embedded definitions against it.
@@ -104,8 +104,9 @@ def _dependencies(fields: Iterable[tuple[str, Any]]) -> list[str]:
 def complete_typestore(
     store: Typestore, msgtypes: Iterable[str], extra: Typesdict, fallback: Typestore
 ) -> dict[str, str]:
-    """Register in ``store`` what ``msgtypes`` need that it lacks, from ``extra`` first, then
-    ``fallback``.  Returns ``{msgtype: first type defined nowhere}`` for the ones still incomplete."""
+    """Register in ``store`` what ``msgtypes`` need that it lacks, from ``fallback`` (the bundled
+    standard types) first, then ``extra``.  Returns ``{msgtype: first type defined nowhere}`` for the
+    ones still incomplete."""
     missing: dict[str, str] = {}
     adding: Typesdict = {}
     for msgtype in dict.fromkeys(msgtypes):
@@ -116,9 +117,9 @@ def complete_typestore(
             if name in seen:
                 continue
             seen.add(name)
-            definition = store.fielddefs.get(name) or adding.get(name) or extra.get(name)
+            definition = store.fielddefs.get(name) or adding.get(name) or fallback.fielddefs.get(name)
             if definition is None:
-                definition = fallback.fielddefs.get(name)
+                definition = extra.get(name)
             if definition is None:
                 lacking = name
                 break

@@ -21,17 +21,26 @@ from bagport.errors import BagportError
 __all__ = ["main"]
 
 
+def _msg_definitions(args: argparse.Namespace) -> dict[str, str]:
+    from bagport.bags import read_msg_path  # noqa: PLC0415 - keep `--help` fast
+
+    return read_msg_path(args.msg_path) if args.msg_path else {}
+
+
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from bagport.bags import format_bag_info, open_bag  # noqa: PLC0415 - keep `--help` fast
 
+    definitions = _msg_definitions(args)
     for uri in args.uri:
-        with open_bag(uri) as reader:
+        with open_bag(uri, msg_definitions=definitions) as reader:
             print(format_bag_info(reader.info))
             read = reader.transfer
             if read.access != "local":
                 print(
                     f"Read:              {read.access}, {read.bytes_read} bytes in {read.requests} requests"
                 )
+            for topic, msgtype in sorted(reader.undefined_types.items()):
+                print(f"  type defined nowhere: {topic} ({msgtype}); give its .msg with --msg-path DIR")
     return 0
 
 
@@ -100,6 +109,7 @@ def _convert(args: argparse.Namespace) -> int:
         video_files_size_in_mb=args.video_files_size_in_mb,
         qa=args.qa,
         on_qa_fail=args.on_qa_fail,
+        msg_path=args.msg_path,
     )
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
@@ -128,7 +138,9 @@ def _convert(args: argparse.Namespace) -> int:
 def _cmd_qa(args: argparse.Namespace) -> int:
     from bagport.episode.score import score_manifest  # noqa: PLC0415
 
-    entries = score_manifest(args.manifest, args.contract, args.qa, workers=args.workers)
+    entries = score_manifest(
+        args.manifest, args.contract, args.qa, workers=args.workers, msg_definitions=_msg_definitions(args)
+    )
     for entry in entries:
         qa = entry.qa
         print(f"{qa.verdict:4s} {qa.score:.2f}  bags[{entry.manifest_entry}] {qa.bag_uri}: {qa.headline()}")
@@ -170,8 +182,9 @@ def _cmd_contract_check(args: argparse.Namespace) -> int:
 
     plan = load_contract(args.contract)
     bags = args.bag or [None]
+    definitions = _msg_definitions(args)
     for bag in bags:
-        rows = describe_features(plan, bag)
+        rows = describe_features(plan, bag, definitions)
         print(f"{args.contract}" + (f" against {bag}" if bag else "") + ": OK")
         print(format_feature_table(plan, rows))
     return 0
@@ -181,7 +194,7 @@ def _cmd_contract_init(args: argparse.Namespace) -> int:
     from bagport.bags import open_bag  # noqa: PLC0415
     from bagport.contract.draft import draft_contract  # noqa: PLC0415
 
-    with open_bag(args.bag) as reader:
+    with open_bag(args.bag, msg_definitions=_msg_definitions(args)) as reader:
         text = draft_contract(reader.info, robot_type=args.robot_type, fps=args.fps)
     if args.out:
         out = Path(args.out)
@@ -300,6 +313,12 @@ def _parser() -> argparse.ArgumentParser:
     synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
     synth.add_argument("--seed", type=int, default=0)
     synth.set_defaults(func=_cmd_synth)
+    for command in (convert, qa, inspect, check, init):
+        command.add_argument(
+            "--msg-path",
+            default=None,
+            help="folder of .msg files (<pkg>/msg/<Type>.msg) for message types the bags do not embed",
+        )
     return parser
 
 

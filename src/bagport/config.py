@@ -58,6 +58,11 @@ class ConvertConfig(BaseModel):
     on_qa_fail: Literal["exclude", "keep", "fail_run"] | None = Field(
         default=None, description="Override the QA file's on_fail: exclude, keep (and flag) or fail_run."
     )
+    msg_path: str | None = Field(
+        default=None,
+        description="Folder of .msg files (<pkg>/msg/<Type>.msg) for types the bags do not embed; "
+        "read once and sent to the workers with each episode.",
+    )
 
     @model_validator(mode="after")
     def _one_bag_source(self) -> ConvertConfig:

@@ -17,7 +17,7 @@ import fsspec
 from fsspec.core import url_to_fs
 
 from bagport import __version__
-from bagport.bags import source_stamp
+from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
@@ -83,6 +83,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             "--overwrite to replace it (the old dataset stays until the new one is complete)."
         )
     staging = config.resolved_staging()
+    msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(bag.uri, contract_text, config.encoder),
@@ -95,6 +96,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             default_task=bag.task,
             metadata=bag.metadata,
             qa=qa.model_dump(mode="json"),
+            msg_definitions=msg_definitions,
         )
         for bag in manifest.bags
         if not done or (bag.uri, source_stamp(bag.uri)) not in done

@@ -26,6 +26,7 @@ from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
 from bagport.bags.typeload import TolerantAnyReader, is_service_event
+from bagport.bags.typesources import complete_typestore, parse_msg_definitions, undefined_type_error
 from bagport.errors import BagportError, BagReadError, TransientError
 from bagport.uris import is_local
 
@@ -49,6 +50,11 @@ class BagReader(Protocol):
     def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]: ...
 
     def close(self) -> None: ...
+
+    @property
+    def undefined_types(self) -> dict[str, str]:
+        """``{topic: msgtype}`` of topics whose type no source defines (reading them fails)."""
+        ...
 
     def __enter__(self) -> BagReader: ...
 
@@ -79,6 +85,7 @@ class RosbagsReader:
         storage: Storage,
         cleanup: Path | None,
         remote: RemoteBag | None = None,
+        msg_definitions: Mapping[str, str] | None = None,
     ) -> None:
         self._uri = uri
         self._cleanup = cleanup
@@ -93,8 +100,15 @@ class RosbagsReader:
         self._mcap_files = plan.data_files if storage is Storage.MCAP else []
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
-            self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=get_typestore(store))
+            extra = parse_msg_definitions(msg_definitions or {})
+            bundled = get_typestore(store)
+            self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled)
             self._reader.open()
+            msgtypes = {c.msgtype for c in self._reader.connections}
+            lacking = complete_typestore(self._reader.typestore, msgtypes, extra, bundled)
+        except BagportError:
+            self.close()
+            raise
         except _ROSBAGS_ERRORS as err:
             self.close()
             raise BagReadError(f"cannot be opened: {err}", uri=uri, fix=_fix_for(err)) from err
@@ -131,6 +145,7 @@ class RosbagsReader:
             ),
         )
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
+        self._lacking = lacking
         if remote is not None:
             self._transfer = remote.stats
         elif cleanup is not None:
@@ -146,6 +161,10 @@ class RosbagsReader:
     @property
     def info(self) -> BagInfo:
         return self._info
+
+    @property
+    def undefined_types(self) -> dict[str, str]:
+        return {c.topic: c.msgtype for c in self._reader.connections if c.msgtype in self._lacking}
 
     def _header_layout(self, msgtype: str) -> str | None:
         fields = self._reader.typestore.fielddefs.get(msgtype)
@@ -181,6 +200,9 @@ class RosbagsReader:
         conns = self._connections(topics)
         if not conns:
             return
+        for conn in conns:
+            if conn.msgtype in self._lacking:
+                raise undefined_type_error(self._uri, conn.topic, conn.msgtype, self._lacking[conn.msgtype])
         layouts = {c.msgtype: self._header_layout(c.msgtype) for c in conns}
         deserialize = self._reader.deserialize
         yielded = dict.fromkeys((c.topic for c in conns), 0)
@@ -281,7 +303,9 @@ def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | N
     return local, scratch
 
 
-def _open_ranged(uri: str, storage_options: Mapping[str, Any]) -> RosbagsReader | None:
+def _open_ranged(
+    uri: str, storage_options: Mapping[str, Any], msg_definitions: Mapping[str, str] | None
+) -> RosbagsReader | None:
     """A reader over a remote MCAP bag read in place with ranged reads; ``None`` to download it."""
     try:
         fs, path = url_to_fs(uri, **storage_options)
@@ -299,22 +323,29 @@ def _open_ranged(uri: str, storage_options: Mapping[str, Any]) -> RosbagsReader 
     if storage not in RANGED_STORAGES:
         remote.close()
         return None
-    return RosbagsReader(uri, root, storage, None, remote)
+    return RosbagsReader(uri, root, storage, None, remote, msg_definitions)
 
 
-def open_bag(uri: str, *, storage_options: Mapping[str, Any] | None = None) -> BagReader:
+def open_bag(
+    uri: str,
+    *,
+    storage_options: Mapping[str, Any] | None = None,
+    msg_definitions: Mapping[str, str] | None = None,
+) -> BagReader:
     """Open a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag from any fsspec URI.
 
     A remote MCAP bag is read in place (its summary, then only the chunks holding the
     topics asked for); other remote bags are downloaded to a private temp folder first.
+    ``msg_definitions`` (``{type name: .msg text}``, see :func:`bagport.bags.read_msg_path`) define
+    types the bag does not embed and no bundled type store has.
     """
-    ranged = _open_ranged(uri, storage_options or {})
+    ranged = _open_ranged(uri, storage_options or {}, msg_definitions)
     if ranged is not None:
         return ranged
     local, cleanup = _fetch(uri, storage_options or {})
     try:
         storage = detect_storage(local, uri)
-        return RosbagsReader(uri, local, storage, cleanup)
+        return RosbagsReader(uri, local, storage, cleanup, None, msg_definitions)
     except BagportError:
         if cleanup is not None:
             shutil.rmtree(cleanup, ignore_errors=True)

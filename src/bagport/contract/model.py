@@ -11,7 +11,16 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
+from pydantic import (
+    AfterValidator,
+    AliasChoices,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PositiveFloat,
+    PositiveInt,
+    StrictInt,
+)
 
 __all__ = [
     "ActionEntry",
@@ -79,6 +88,10 @@ class Selector(_Strict):
     """Which dimensions of a message make up the feature, in order."""
 
     names: tuple[str, ...] = ()
+    child_frame: str | None = None
+    """tf2_msgs/msg/TFMessage only: the transform whose ``child_frame_id`` is this frame."""
+    parent_frame: str | None = None
+    """tf2_msgs/msg/TFMessage only, optional: and whose ``header.frame_id`` is this frame."""
 
 
 def _check_depth_range(bounds: tuple[float, float] | None) -> tuple[float, float] | None:
@@ -157,7 +170,7 @@ class ScalarEntry(_Strict):
 
 class Contract(_Strict):
     robot_type: str = Field(validation_alias=AliasChoices("robot_type", "name"))
-    fps: PositiveInt = Field(default=30, validation_alias=AliasChoices("fps", "rate_hz"))
+    fps: StrictInt = Field(default=30, gt=0, validation_alias=AliasChoices("fps", "rate_hz"))
     observations: tuple[ObservationEntry, ...] = ()
     actions: tuple[ActionEntry, ...] = ()
     tasks: tuple[TaskEntry, ...] = ()

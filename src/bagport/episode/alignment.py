@@ -169,7 +169,7 @@ def align_sources(
     kinds = []
     for feature in plan.features:
         for src in feature.sources:
-            topic = timeline.topics[src.topic]
+            topic = timeline.topics[src.stream]
             chosen.append((src, topic, _stamp_source(src, topic, uri)))
             kinds.append(feature.kind)
     start_ns, end_ns = _window(chosen, uri)

@@ -18,7 +18,14 @@ import numpy.typing as npt
 from bagport.align import QuaternionGroup, Selection, blend, quaternion_groups
 from bagport.bags import BagMessage, BagReader
 from bagport.contract.plan import FeatureKind, FeatureSpec, SourceSpec
-from bagport.decode import VectorExtractor, decode_image, is_depth, make_extractor, resize_image
+from bagport.decode import (
+    VectorExtractor,
+    decode_image,
+    find_transform,
+    is_depth,
+    make_extractor,
+    resize_image,
+)
 from bagport.episode.timeline import TopicTimeline
 from bagport.errors import AlignmentError, DecodeError
 
@@ -114,17 +121,18 @@ def assemble_frames(
     on_frame: Callable[[Frame], None],
 ) -> int:
     """Stream ``reader`` and call ``on_frame`` for every tick, in order; returns frames emitted."""
-    by_topic: dict[str, list[AlignedSource]] = {}
+    by_topic: dict[str, dict[str, list[AlignedSource]]] = {}
     for source in sources:
         source.prepare()
-        by_topic.setdefault(source.src.topic, []).append(source)
-    arrived = dict.fromkeys(by_topic, 0)
+        by_topic.setdefault(source.src.topic, {}).setdefault(source.src.stream, []).append(source)
+    filters = {s.src.stream: f for s in sources if (f := s.src.stream_filter) is not None}
+    arrived = {stream: 0 for streams in by_topic.values() for stream in streams}
     total = int(ticks_ns.size)
     next_tick = 0
     by_key = {f.key: [s for s in sources if s.src.key == f.key] for f in features}
 
     def ready(k: int) -> bool:
-        return all(arrived[s.src.topic] > s.required[k] for s in sources)
+        return all(arrived[s.src.stream] > s.required[k] for s in sources)
 
     def emit_ready() -> None:
         nonlocal next_tick
@@ -135,16 +143,23 @@ def assemble_frames(
 
     emit_ready()  # ticks made only of fills need no message
     for message in reader.messages(tuple(by_topic)):
-        index = arrived[message.topic]
-        arrived[message.topic] = index + 1
         wanted = False
-        for source in by_topic[message.topic]:
-            if index < source.needed.size and source.needed[index]:
-                wanted = True
-                try:
-                    source.cache[index] = _decode(source, message)
-                except DecodeError as err:
-                    raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
+        for stream, stream_sources in by_topic[message.topic].items():
+            spec = filters.get(stream)
+            if (
+                spec is not None
+                and find_transform(message.msg(), spec.child_frame, spec.parent_frame) is None
+            ):
+                continue  # the same test as the timeline's: this message is no sample of the stream
+            index = arrived[stream]
+            arrived[stream] = index + 1
+            for source in stream_sources:
+                if index < source.needed.size and source.needed[index]:
+                    wanted = True
+                    try:
+                        source.cache[index] = _decode(source, message)
+                    except DecodeError as err:
+                        raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
         if wanted:
             emit_ready()
         if next_tick == total:

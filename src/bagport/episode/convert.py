@@ -110,7 +110,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     reusable = _reusable(request, stamp)
     if reusable is not None:
         return reusable
-    with open_bag(request.bag_uri) as reader:
+    with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as reader:
         info = reader.info
         check_bag_fits(info, plan)
         timeline = scan_plan_timeline(reader, plan)

@@ -37,7 +37,7 @@ Int64Array = npt.NDArray[np.int64]
 def _streams(timeline: Timeline, sources: Sequence[AlignedSource]) -> list[StreamStamps]:
     by_topic: dict[str, StreamStamps] = {}
     for source in sources:
-        topic = timeline.topics[source.src.topic]
+        topic = timeline.topics[source.src.stream]
         if topic.topic not in by_topic:
             by_topic[topic.topic] = StreamStamps(
                 topic.topic,

@@ -23,6 +23,8 @@ class EpisodeRequest:
     metadata: dict[str, Any] = field(default_factory=dict)
     qa: dict[str, Any] = field(default_factory=dict)
     """QA thresholds (a :class:`bagport.qa.QAConfig` as a dict); empty: the defaults."""
+    msg_definitions: dict[str, str] = field(default_factory=dict)
+    """``{type name: .msg text}`` from ``--msg-path``: workers need no access to the folder."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

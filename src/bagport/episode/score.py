@@ -34,7 +34,7 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
     config = QAConfig.model_validate(request.qa)
     uri = request.bag_uri
     try:
-        with open_bag(uri) as reader:
+        with open_bag(uri, msg_definitions=request.msg_definitions) as reader:
             check_bag_fits(reader.info, plan)
             timeline = scan_plan_timeline(reader, plan)
             sources, ticks, alignment = align_sources(plan, timeline, uri)
@@ -63,7 +63,12 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
 
 
 def score_manifest(
-    manifest_uri: str, contract_uri: str, qa_uri: str | None = None, *, workers: int | None = None
+    manifest_uri: str,
+    contract_uri: str,
+    qa_uri: str | None = None,
+    *,
+    workers: int | None = None,
+    msg_definitions: dict[str, str] | None = None,
 ) -> list[QAEntry]:
     """Score every bag of a manifest (in parallel processes), in manifest order."""
     contract_text = read_text(contract_uri, "contract")
@@ -81,6 +86,7 @@ def score_manifest(
             default_task=bag.task,
             metadata=bag.metadata,
             qa=qa.model_dump(mode="json"),
+            msg_definitions=dict(msg_definitions or {}),
         )
         for bag in manifest.bags
     ]

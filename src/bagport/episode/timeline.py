@@ -7,15 +7,17 @@ Task prompts (small strings) are collected here too.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
-from bagport.bags import BagReader
+from bagport.bags import BagMessage, BagReader
 from bagport.contract import ContractPlan
-from bagport.errors import BagReadError
+from bagport.contract.plan import StreamFilter
+from bagport.decode import child_frames, find_transform, transform_stamp_ns
+from bagport.errors import AlignmentError, BagReadError
 
 __all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_plan_timeline", "scan_timeline"]
 
@@ -77,30 +79,72 @@ def _publish_times(
     return out
 
 
+def _filtered_stamp(message: BagMessage, spec: StreamFilter, seen: dict[str, None]) -> int | None:
+    """The transform's header stamp when the message carries it, else ``None`` (not a sample)."""
+    msg = message.msg()
+    transform = find_transform(msg, spec.child_frame, spec.parent_frame)
+    if transform is None:
+        if len(seen) < 50:
+            seen.update(dict.fromkeys(child_frames(msg)))
+        return None
+    return transform_stamp_ns(transform)
+
+
 def scan_timeline(
-    reader: BagReader, topics: Iterable[str], task_topics: Iterable[str], publish_topics: Iterable[str] = ()
+    reader: BagReader,
+    topics: Iterable[str],
+    task_topics: Iterable[str],
+    filters: Mapping[str, StreamFilter] | None = None,
+    publish_topics: Iterable[str] = (),
 ) -> Timeline:
-    """Stamps of every feature topic; MCAP publish times too for ``publish_topics`` (``stamp: publish``)."""
+    """Stamps of every stream; ``topics`` are stream names (see ``SourceSpec.stream``): a topic, or a
+    name in ``filters`` whose samples are only the messages of its topic carrying its transform.
+    MCAP publish times too for ``publish_topics`` (``stamp: publish``; unfiltered streams only)."""
     feature_topics = tuple(topics)
+    filters = dict(filters or {})
     task_set = frozenset(task_topics)
     log: dict[str, list[int]] = {t: [] for t in feature_topics}
     header: dict[str, list[int | None]] = {t: [] for t in feature_topics}
+    by_topic: dict[str, list[str]] = {}
+    for stream in feature_topics:
+        by_topic.setdefault(filters[stream].topic if stream in filters else stream, []).append(stream)
+    counts = dict.fromkeys(by_topic, 0)
+    frames_seen: dict[str, None] = {}
     tasks: list[TaskMessage] = []
-    for message in reader.messages(tuple(dict.fromkeys((*feature_topics, *task_set)))):
+    for message in reader.messages(tuple(dict.fromkeys((*by_topic, *task_set)))):
         if message.topic in task_set:
             stamp = message.header_stamp_ns()
             tasks.append(TaskMessage(stamp if stamp else message.log_time_ns, str(message.msg().data)))
-        if message.topic in log:
-            log[message.topic].append(message.log_time_ns)
-            header[message.topic].append(message.header_stamp_ns())
-    for topic in feature_topics:
+        if message.topic not in by_topic:
+            continue
+        counts[message.topic] += 1
+        for stream in by_topic[message.topic]:
+            spec = filters.get(stream)
+            stamp_ns = (
+                message.header_stamp_ns() if spec is None else _filtered_stamp(message, spec, frames_seen)
+            )
+            if spec is not None and stamp_ns is None:
+                continue
+            log[stream].append(message.log_time_ns)
+            header[stream].append(stamp_ns)
+    for topic, count in counts.items():
         promised = reader.info.topic(topic)
-        if promised is not None and promised.count != len(log[topic]):
+        if promised is not None and promised.count != count:
             raise BagReadError(
-                f"yielded {len(log[topic])} messages on {topic}, its index promises {promised.count}",
+                f"yielded {count} messages on {topic}, its index promises {promised.count}",
                 uri=reader.info.uri,
                 topic=topic,
                 fix="the bag is truncated or its index is stale: reindex it (`ros2 bag reindex` / `rosbag reindex`).",
+            )
+    for stream, spec in filters.items():
+        if stream in log and not log[stream]:
+            raise AlignmentError(
+                f"no message on {spec.topic} carries a transform to child frame {spec.child_frame!r}"
+                + (f" from {spec.parent_frame!r}" if spec.parent_frame else "")
+                + f" (transforms seen: {', '.join(frames_seen) or 'none'})",
+                uri=reader.info.uri,
+                topic=spec.topic,
+                fix="set selector.child_frame (and parent_frame) to a frame the bag publishes.",
             )
     publish = _publish_times(reader, log, tuple(dict.fromkeys(publish_topics)))
     result: dict[str, TopicTimeline] = {}
@@ -122,7 +166,8 @@ def scan_plan_timeline(reader: BagReader, plan: ContractPlan) -> Timeline:
     """:func:`scan_timeline` of every topic a contract reads (publish times where it asks for them)."""
     return scan_timeline(
         reader,
-        [s.topic for s in plan.sources],
+        plan.streams(),
         [t.topic for t in plan.task_topics],
-        [s.topic for s in plan.sources if s.stamp == "publish"],
+        plan.stream_filters(),
+        [s.stream for s in plan.sources if s.stamp == "publish" and s.child_frame is None],
     )

@@ -58,6 +58,11 @@ class ConvertConfig(BaseModel):
     on_qa_fail: Literal["exclude", "keep", "fail_run"] | None = Field(
         default=None, description="Override the QA file's on_fail: exclude, keep (and flag) or fail_run."
     )
+    fail_fast: bool = Field(
+        default=False,
+        description="Stop the run at the first bag that fails to convert (or fails QA under fail_run); "
+        "default: the bag is reported and the other episodes continue.",
+    )
 
     @model_validator(mode="after")
     def _one_bag_source(self) -> ConvertConfig:

@@ -37,6 +37,8 @@ class DatasetBase:
     next_provenance: tuple[int, int]
     run_number: int
     """Runs recorded so far (``meta/provenance/run.json`` is run 0, appends add ``run-001.json``...)."""
+    data_files: tuple[Path, ...] = ()
+    """The existing data files (read, never rewritten: dataset-wide quantiles cover their frames)."""
 
     @property
     def episodes(self) -> int:
@@ -90,4 +92,5 @@ def read_base(root: Path) -> DatasetBase:
         next_episodes=_next(root / "meta" / "episodes", "chunk-*/file-*.parquet", chunks),
         next_provenance=_next(root / "meta" / "provenance", "chunk-*/file-*.parquet", chunks),
         run_number=len(runs),
+        data_files=tuple(sorted(root.glob("data/chunk-*/file-*.parquet"))),
     )

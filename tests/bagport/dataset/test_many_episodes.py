@@ -46,8 +46,13 @@ actions:
 
 
 def _clip_frames(summary: EpisodeSummary) -> list[npt.NDArray[np.uint8]]:
+    frames: list[npt.NDArray[np.uint8]] = []
     with av.open(summary.file(summary.videos[KEY])) as container:
-        return [frame.to_ndarray(format="rgb24") for frame in container.decode(video=0)]
+        frames.extend(
+            np.asarray(frame.to_ndarray(format="rgb24"), dtype=np.uint8)
+            for frame in container.decode(video=0)
+        )
+    return frames
 
 
 @pytest.fixture(scope="module")

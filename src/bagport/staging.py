@@ -81,6 +81,10 @@ class EpisodeSummary:
     qa: dict[str, Any] = field(default_factory=dict)
     """QA score, verdict and the checks that did not pass (the full record is ``qa.json``)."""
     qa_sha256: str = ""
+    clip_keys: dict[str, str] = field(default_factory=dict)
+    """Per camera: what its clip depends on (``bagport.episode.reuse``); equal keys, equal clips."""
+    reused_clips: dict[str, str] = field(default_factory=dict)
+    """Per camera whose clip was copied from an earlier staged episode of the bag: that episode's id."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

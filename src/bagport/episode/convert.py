@@ -22,11 +22,12 @@ from bagport.episode.checks import bag_fingerprint, check_bag_fits
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
+from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
 from bagport.episode.timeline import scan_timeline
 from bagport.errors import DecodeError
-from bagport.qa import EpisodeQA, QAConfig, ValueMonitor
+from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,
@@ -115,6 +116,8 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         timeline = scan_timeline(reader, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics])
         sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
         frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
+        keys = clip_keys(request, stamp, plan.fps, sources, ticks)
+        reused = find_reusable_clips(request, keys)  # cameras this contract change does not touch
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
         try:
             qa_config = QAConfig.model_validate(request.qa)
@@ -122,10 +125,18 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             fidelity = EpisodeFidelity(qa_config.video, workdir / "fidelity-refs", settings.g or 1)
             sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks, monitor, fidelity)
             try:
-                assemble_frames(reader, request.bag_uri, plan.features, sources, ticks, sinks.on_frame)
+                assemble_frames(
+                    reader,
+                    request.bag_uri,
+                    [f for f in plan.features if f.key not in reused],
+                    [s for s in sources if s.src.key not in reused],  # a reused camera is not even read
+                    ticks,
+                    sinks.on_frame,
+                )
             finally:
                 clips = sinks.close()
             video_checks, video_plots = fidelity.check(clips, plan.fps)  # before publishing: refs are scratch
+            extra_plots = _take_reused(workdir, reused, video_checks, video_plots, monitor)
             write_provenance(workdir / PROVENANCE_FILE, sources, ticks)
             extra = [
                 *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
@@ -134,10 +145,10 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             ]
             qa = assess_episode(
                 request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,
-                extra_plots={"fidelity": video_plots} if video_plots else {},
+                extra_plots=extra_plots,
             )  # fmt: skip
             (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
-            features = _staged_features(plan, sources, sinks, clips, settings)
+            features = _staged_features(plan, sources, sinks, clips, settings, reused)
             stats: dict[str, Any] = {}
             table = pq.read_table(
                 workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
@@ -146,6 +157,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 stats[name] = stats_to_json(vector_stats(vector_column(table, name)))
             for key, acc in sinks.image_stats.items():
                 stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
+            stats.update({key: clip.stats for key, clip in reused.items()})
             (workdir / STATS_FILE).write_text(json.dumps(stats))
             target = episode_dir(request.staging_uri, request.episode_id)
             summary = EpisodeSummary(
@@ -164,7 +176,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 task_source=task_source,
                 features=features,
                 stamp_sources={f"{s.src.key}@{s.src.topic}": s.stamp_used for s in sources},
-                videos={key: f"videos/{key}.mp4" for key in clips},
+                videos={f.key: f"videos/{f.key}.mp4" for f in features if f.video_info is not None},
                 metadata=dict(request.metadata),
                 bagport_version=__version__,
                 contract_sha256=request.contract_sha256,
@@ -173,6 +185,8 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 alignment=alignment,
                 qa=qa_brief(qa),
                 qa_sha256=request.qa_sha256,
+                clip_keys=keys,
+                reused_clips={key: clip.episode_id for key, clip in reused.items()},
             )
             _publish(workdir, target, summary)
         finally:
@@ -221,11 +235,15 @@ def _staged_features(
     sinks: _EpisodeSinks,
     clips: dict[str, Any],
     settings: EncoderSettings,
+    reused: dict[str, ReusedClip],
 ) -> tuple[StagedFeature, ...]:
     out = []
     for feature in plan.features:
         mine = [s for s in sources if s.src.key == feature.key]
         topics = tuple(s.src.topic for s in mine)
+        if feature.key in reused:
+            out.append(replace(reused[feature.key].feature, sources=topics))
+            continue
         if feature.kind is FeatureKind.VIDEO:
             clip = clips[feature.key]
             video_info = {
@@ -254,6 +272,29 @@ def _staged_features(
             )
         )
     return tuple(out)
+
+
+def _take_reused(
+    workdir: Path,
+    reused: dict[str, ReusedClip],
+    video_checks: list[CheckResult],
+    video_plots: dict[str, Any],
+    monitor: ValueMonitor,
+) -> dict[str, Any]:
+    """Copy the reused clips into the episode and add their QA results; returns the extra QA plots."""
+    plots: dict[str, Any] = {}
+    for key, clip in reused.items():
+        fs, path = url_to_fs(clip.clip_uri)
+        fs.get_file(path, str(workdir / "videos" / f"{key}.mp4"))
+        video_checks.extend(clip.checks)
+        if clip.fidelity_plot is not None:
+            video_plots[key] = clip.fidelity_plot
+    if video_plots:
+        plots["fidelity"] = video_plots
+    means = {key: clip.image_means for key, clip in reused.items() if clip.image_means is not None}
+    if means:
+        plots["image_means"] = {**monitor.plots()["image_means"], **means}
+    return plots
 
 
 def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:

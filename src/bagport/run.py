@@ -22,6 +22,7 @@ from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.history import converted_bags
+from bagport.dataset.remote import recover_remote_append
 from bagport.dataset.write import recover_interrupted_append
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
@@ -76,6 +77,8 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     if config.append and fs.exists(out_path):
         if is_local(fs):
             recover_interrupted_append(Path(out_path))
+        else:
+            recover_remote_append(config.output)
         done = converted_bags(config.output)
     elif fs.exists(out_path) and not config.overwrite:
         raise DatasetWriteError(

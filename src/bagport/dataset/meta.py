@@ -56,6 +56,15 @@ class DatasetLimits:
     data_files_size_in_mb: float = 100
     video_files_size_in_mb: float = 200
 
+    @classmethod
+    def from_info(cls, info: dict[str, Any]) -> DatasetLimits:
+        """The limits an existing dataset was written with (an append keeps them)."""
+        return cls(
+            chunks_size=int(info["chunks_size"]),
+            data_files_size_in_mb=float(info["data_files_size_in_mb"]),
+            video_files_size_in_mb=float(info["video_files_size_in_mb"]),
+        )
+
 
 @dataclass(frozen=True, slots=True)
 class EpisodeStats:
@@ -134,17 +143,19 @@ def _stat_columns(stats: dict[str, FeatureStats], keys: Sequence[str]) -> dict[s
 
 
 def dataset_quantiles(
-    data_files: Sequence[Path], merged: dict[str, FeatureStats]
+    data_files: Sequence[str | Path], merged: dict[str, FeatureStats]
 ) -> dict[str, dict[str, npt.NDArray[np.float64]]]:
     """Quantiles of each vector feature over every frame of ``data_files`` (one streaming pass), between
     the merged min and max; shaped like the merged stats."""
     if not merged or not data_files:
         return {}
     counters = {key: QuantileHistogram(stats["min"], stats["max"]) for key, stats in merged.items()}
-    for path in data_files:
-        for batch in pq.ParquetFile(path).iter_batches(batch_size=65_536, columns=list(counters)):
-            for key, counter in counters.items():
-                counter.update(column_matrix(batch.column(key)))
+    for uri in data_files:
+        fs, path = url_to_fs(str(uri))
+        with fs.open(path, "rb") as handle:
+            for batch in pq.ParquetFile(handle).iter_batches(batch_size=65_536, columns=list(counters)):
+                for key, counter in counters.items():
+                    counter.update(column_matrix(batch.column(key)))
     return {
         key: {q: value.reshape(np.shape(merged[key]["min"])) for q, value in counter.quantiles().items()}
         for key, counter in counters.items()
@@ -161,7 +172,7 @@ def write_meta(
     episode_stats: Sequence[EpisodeStats],
     info: dict[str, Any],
     base: DatasetBase | None = None,
-    data_files: Sequence[Path] = (),
+    data_files: Sequence[str | Path] = (),
 ) -> None:
     """Write ``meta/``; with ``base`` (an append) the new episodes continue the existing ones in a new
     episodes file, and stats merge with the existing dataset's. ``data_files`` are every data file

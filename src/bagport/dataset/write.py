@@ -20,6 +20,7 @@ from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
 from bagport.dataset.qa import write_qa
+from bagport.dataset.remote import append_remote
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
 from bagport.qa import QAEntry
@@ -141,7 +142,7 @@ def _build(
     )
     if base is not None:
         _check_same_features(base, info)
-    data_files = [
+    data_files: list[str | Path] = [
         *(base.data_files if base is not None else ()),
         *sorted(root.glob("data/chunk-*/file-*.parquet")),
     ]
@@ -214,10 +215,14 @@ def write_dataset(
     local = is_local(fs)
     if append and fs.exists(out_path):
         if not local:
-            raise DatasetWriteError(
-                f"--append to {output} is not supported: appending publishes atomically by renames, which only "
-                "a local output allows. Fix: append to a local dataset and sync it, or convert into a new --output."
-            )
+
+            def build(root: Path, base: DatasetBase, limits: DatasetLimits) -> DatasetReport:
+                return _build(
+                    root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {}, base
+                )
+
+            report = append_remote(output, build)
+            return replace(report, root=output, size_bytes=int(fs.du(out_path)))
         return _append(Path(out_path), summaries, robot_type, run_record or {}, qa, qa_config or {})
     if fs.exists(out_path) and not overwrite:
         raise DatasetWriteError(
@@ -274,12 +279,7 @@ def _append(
     """
     recover_interrupted_append(final)
     base = read_base(final)
-    info = base.info
-    limits = DatasetLimits(
-        chunks_size=int(info["chunks_size"]),
-        data_files_size_in_mb=float(info["data_files_size_in_mb"]),
-        video_files_size_in_mb=float(info["video_files_size_in_mb"]),
-    )
+    limits = DatasetLimits.from_info(base.info)
     build_root = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex[:8]}"
     build_root.mkdir(parents=True)
     moved: list[Path] = []

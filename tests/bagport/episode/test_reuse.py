@@ -42,7 +42,7 @@ def test_a_changed_state_selector_reuses_both_camera_clips(
 ) -> None:
     bag, staging = tmp_path / "ep", tmp_path / "staging"
     write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
-    assert FEWER_JOINTS != SAMPLE_CONTRACT.read_text()
+    assert SAMPLE_CONTRACT.read_text() != FEWER_JOINTS
     first = convert_episode(_request(bag, staging, SAMPLE_CONTRACT.read_text()))
     assert first.reused_clips == {}
     assert set(first.clip_keys) == {"observation.images.front", "observation.images.wrist"}

@@ -20,7 +20,7 @@ from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
 from bagport.dataset.qa import write_qa
-from bagport.dataset.remote import append_remote
+from bagport.dataset.remote import append_remote, publish_remote, recover_remote_publish
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
 from bagport.qa import QAEntry
@@ -208,11 +208,15 @@ def write_dataset(
     Everything is built in a temporary folder beside ``output`` and renamed into
     place at the end, so a reader never sees a half-written dataset and a failure
     leaves whatever was at ``output`` untouched. With ``append``, the episodes are
-    added to the dataset at ``output`` (created if missing) as new files.
+    added to the dataset at ``output`` (created if missing) as new files. On an object
+    store (no renames) the dataset is built locally and published under a journal that
+    the next run rolls back after a crash (:mod:`bagport.dataset.remote`).
     """
     limits = limits or DatasetLimits()
     fs, out_path = url_to_fs(output)
     local = is_local(fs)
+    if not local and fs.exists(out_path):
+        recover_remote_publish(output)  # a crashed publish: back to the previous version (or nothing)
     if append and fs.exists(out_path):
         if not local:
 
@@ -241,9 +245,9 @@ def write_dataset(
         if local:
             _swap_into_place(build_root, final)
         else:
-            if fs.exists(out_path):
-                fs.rm(out_path, recursive=True)
-            fs.put(str(build_root), out_path, recursive=True)
+            files = sorted(p.relative_to(build_root).as_posix() for p in build_root.rglob("*") if p.is_file())
+            stale = sorted({p[len(out_path.rstrip("/")) + 1 :] for p in fs.find(out_path)} - set(files))
+            publish_remote(build_root, output, files, stale)
     except BaseException:
         shutil.rmtree(build_root, ignore_errors=True)
         raise

@@ -11,7 +11,7 @@ import s3fs
 
 import bagport.dataset.remote
 from bagport.config import ConvertConfig
-from bagport.dataset.remote import recover_remote_append
+from bagport.dataset.remote import recover_remote_publish
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
 from bagport.run import plan_run, reduce_run
@@ -105,9 +105,44 @@ def test_a_crash_while_publishing_on_s3_rolls_back_to_the_previous_version(
     assert "data/chunk-000/file-001.parquet" in crashed  # uploaded before the crash
 
     monkeypatch.setattr(bagport.dataset.remote, "_upload", real_upload)
-    assert recover_remote_append("s3://fleet/crashed")
+    assert recover_remote_publish("s3://fleet/crashed")
     assert _etags(s3, "fleet/crashed") == previous  # the previous version, byte for byte
     assert _append(bags, ["a", "b"], "s3://fleet/crashed", tmp_path / "staging") == 1
     local = tmp_path / "downloaded"
     s3.get("fleet/crashed", str(local), recursive=True)
     assert validate_dataset(local, repo_id="test/s3-crash").episodes == 2
+
+
+def test_a_crash_while_overwriting_on_s3_rolls_back_and_a_new_write_replaces_stale_files(
+    bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _append(bags, ["a", "b"], "s3://fleet/overwritten", tmp_path / "staging")
+    previous = _etags(s3, "fleet/overwritten")
+    manifest = bags / "manifest-a-only.yaml"
+    manifest.write_text("bags:\n  - uri: a\n")
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output="s3://fleet/overwritten",
+        encoder=FAST_CODEC, staging=str(tmp_path / "staging"), overwrite=True,
+    )  # fmt: skip
+    plan = plan_run(config)
+    staged = [convert_episode(r).dir_uri for r in plan.requests]
+    real_upload = bagport.dataset.remote._upload
+
+    def crash_at_info(fs: Any, local: Path, remote: str) -> None:
+        if remote.endswith("meta/info.json"):
+            raise KeyboardInterrupt
+        real_upload(fs, local, remote)
+
+    monkeypatch.setattr(bagport.dataset.remote, "_upload", crash_at_info)
+    with pytest.raises(KeyboardInterrupt):
+        reduce_run(plan, staged)
+    assert _etags(s3, "fleet/overwritten") != previous  # half-replaced, with its journal
+    monkeypatch.setattr(bagport.dataset.remote, "_upload", real_upload)
+    plan = plan_run(config)  # planning the next run rolls the crashed one back
+    assert _etags(s3, "fleet/overwritten") == previous
+    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    after = _etags(s3, "fleet/overwritten")
+    assert not [rel for rel in after if rel.startswith(".append")]
+    local = tmp_path / "downloaded"
+    s3.get("fleet/overwritten", str(local), recursive=True)
+    assert validate_dataset(local, repo_id="test/s3-overwrite").episodes == 1

@@ -208,7 +208,8 @@ def qa_brief(qa: EpisodeQA) -> dict[str, Any]:
 
 
 def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
-    """A completed staged episode of the same bag files, contract, encoder and task default.
+    """A completed staged episode of the same bag files, contract, encoder, task default, QA settings
+    and bagport version.
 
     Re-running a flow after a failure skips the episodes that already finished.
     """
@@ -223,6 +224,7 @@ def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
         and existing.contract_sha256 == request.contract_sha256
         and existing.default_task == request.default_task
         and existing.qa_sha256 == request.qa_sha256
+        and existing.bagport_version == __version__  # another bagport may convert differently
     )
     if not same:
         return None

@@ -95,3 +95,16 @@ def test_a_changed_camera_setting_re_encodes_that_camera_only(tmp_path: Path) ->
     assert resized.reused_clips == {"observation.images.wrist": first.episode_id}
     front = {f.key: f for f in resized.features}["observation.images.front"]
     assert front.shape == (16, 24, 3)
+
+
+def test_an_episode_staged_by_another_bagport_version_is_converted_again(tmp_path: Path) -> None:
+    bag, staging = tmp_path / "ep", tmp_path / "staging"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.3, cameras=CAMERAS))
+    request = _request(bag, staging, SAMPLE_CONTRACT.read_text())
+    first = convert_episode(request)
+    assert convert_episode(request) == first  # same version: reused
+    marker = Path(first.file("episode.json"))
+    marker.write_text(json.dumps({**json.loads(marker.read_text()), "bagport_version": "0.0.1"}))
+    again = convert_episode(request)
+    assert again.bagport_version == first.bagport_version != "0.0.1"
+    assert json.loads(marker.read_text())["bagport_version"] == first.bagport_version

@@ -4,6 +4,7 @@ the run with nothing written (--fail-fast); only transient I/O errors are retrie
 from __future__ import annotations
 
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -14,7 +15,7 @@ from bagport.config import ConvertConfig
 from bagport.episode import EpisodeRequest
 from bagport.errors import BagReadError, TransientError
 from bagport.staging import EpisodeSummary
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from flows.cli import main
 from flows.convert import ConversionError, prefect_api, run_config
 from tasks.episode import convert_episode_task
@@ -70,6 +71,22 @@ def test_fail_fast_stops_at_the_first_failed_bag_and_writes_nothing(
     assert not out.exists()
     assert {p.name for p in tmp_path.iterdir()} <= {"ds.staging"}  # no half-written dataset beside it
     assert len(_staged(out)) <= 1  # one worker: at most the episode already running finished
+
+
+def test_fail_fast_under_fail_run_stops_at_the_first_episode_failing_qa(
+    prefect: None, tmp_path: Path
+) -> None:
+    fleet = tmp_path / "fleet"
+    spec = EpisodeSpec(duration_s=0.5, cameras=CAMERAS)
+    write_episode_bag(fleet / "nan", "mcap", replace(spec, faults=Faults(joint_nan_at_s=0.2)))
+    write_episode_bag(fleet / "ok", "mcap", spec)
+    (fleet / "manifest.yaml").write_text("bags:\n  - uri: nan\n  - uri: ok\n")
+    out = tmp_path / "ds"
+    with pytest.raises(
+        ConversionError, match=r"bags\[0\] .*nan failed QA or conversion \(QA verdict fail, on_fail"
+    ):
+        run_config(_config(fleet, out, fail_fast=True, on_qa_fail="fail_run"))
+    assert not out.exists()
 
 
 def test_by_default_a_bad_bag_is_reported_and_the_others_are_converted(

@@ -110,6 +110,7 @@ def _convert(args: argparse.Namespace) -> int:
         qa=args.qa,
         on_qa_fail=args.on_qa_fail,
         msg_path=args.msg_path,
+        fail_fast=args.fail_fast,
     )
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
@@ -266,6 +267,11 @@ def _parser() -> argparse.ArgumentParser:
         choices=["exclude", "keep", "fail_run"],
         default=None,
         help="episodes failing QA or conversion: leave out (default), keep and flag, or fail the run",
+    )
+    convert.add_argument(
+        "--fail-fast",
+        action="store_true",
+        help="stop at the first bag that fails to convert, writing nothing (default: report it, convert the others)",
     )
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(

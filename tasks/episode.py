@@ -60,4 +60,5 @@ def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any] 
         "bag_uri": summary.bag_uri,
         "frames": summary.frames,
         "tasks": list(summary.tasks),
+        "qa_verdict": summary.qa.get("verdict"),
     }

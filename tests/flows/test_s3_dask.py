@@ -7,7 +7,6 @@ import json
 import os
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -16,15 +15,9 @@ import s3fs
 from bagport.dataset.validate import validate_dataset
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import REPO, SAMPLE_CONTRACT
-from tests.s3 import SECRET, moto_s3
+from tests.s3 import SECRET
 
 pytestmark = pytest.mark.slow
-
-
-@pytest.fixture(scope="module")
-def s3_env() -> Iterator[dict[str, str]]:
-    with moto_s3() as env:
-        yield env
 
 
 def test_s3_bags_staging_and_output_on_dask(tmp_path: Path, s3_env: dict[str, str]) -> None:

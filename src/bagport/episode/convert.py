@@ -23,11 +23,12 @@ from bagport.episode.checks import bag_fingerprint, check_bag_fits
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
+from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
 from bagport.episode.timeline import scan_plan_timeline
 from bagport.errors import DecodeError
-from bagport.qa import EpisodeQA, QAConfig, ValueMonitor
+from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,
@@ -116,6 +117,8 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         timeline = scan_plan_timeline(reader, plan)
         sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
         frame_tasks, task_source = resolve_tasks(timeline.tasks, ticks, info.custom_data, request)
+        keys = clip_keys(request, stamp, plan.fps, sources, ticks)
+        reused = find_reusable_clips(request, keys)  # cameras this contract change does not touch
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
         try:
             qa_config = QAConfig.model_validate(request.qa)
@@ -123,10 +126,18 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             fidelity = EpisodeFidelity(qa_config.video, workdir / "fidelity-refs", settings.g or 1)
             sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks, monitor, fidelity)
             try:
-                assemble_frames(reader, request.bag_uri, plan.features, sources, ticks, sinks.on_frame)
+                assemble_frames(
+                    reader,
+                    request.bag_uri,
+                    [f for f in plan.features if f.key not in reused],
+                    [s for s in sources if s.src.key not in reused],  # a reused camera is not even read
+                    ticks,
+                    sinks.on_frame,
+                )
             finally:
                 clips = sinks.close()
             video_checks, video_plots = fidelity.check(clips, plan.fps)  # before publishing: refs are scratch
+            extra_plots = _take_reused(workdir, reused, video_checks, video_plots, monitor)
             write_provenance(workdir / PROVENANCE_FILE, sources, ticks)
             extra = [
                 *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
@@ -135,10 +146,10 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             ]
             qa = assess_episode(
                 request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,
-                extra_plots={"fidelity": video_plots} if video_plots else {}, alignment=alignment,
+                extra_plots=extra_plots, alignment=alignment,
             )  # fmt: skip
             (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
-            features = _staged_features(plan, sources, sinks, clips)
+            features = _staged_features(plan, sources, sinks, clips, reused)
             stats: dict[str, Any] = {}
             table = pq.read_table(
                 workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
@@ -148,6 +159,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             for key, camera in sinks.cameras.items():
                 acc = camera.stats
                 stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
+            stats.update({key: clip.stats for key, clip in reused.items()})
             (workdir / STATS_FILE).write_text(json.dumps(stats))
             target = episode_dir(request.staging_uri, request.episode_id)
             summary = EpisodeSummary(
@@ -166,7 +178,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 task_source=task_source,
                 features=features,
                 stamp_sources={f"{s.src.key}@{s.src.topic}": s.stamp_used for s in sources},
-                videos={key: f"videos/{key}.mp4" for key in clips},
+                videos={f.key: f"videos/{f.key}.mp4" for f in features if f.video_info is not None},
                 metadata=dict(request.metadata),
                 bagport_version=__version__,
                 contract_sha256=request.contract_sha256,
@@ -176,6 +188,8 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 qa=qa_brief(qa),
                 qa_sha256=request.qa_sha256,
                 bag_read={**reader.transfer.to_dict(), "warnings": list(info.warnings)},
+                clip_keys=keys,
+                reused_clips={key: clip.episode_id for key, clip in reused.items()},
             )
             _publish(workdir, target, summary)
         finally:
@@ -197,7 +211,8 @@ def qa_brief(qa: EpisodeQA) -> dict[str, Any]:
 
 
 def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
-    """A completed staged episode of the same bag files, contract, encoder and task default.
+    """A completed staged episode of the same bag files, contract, encoder, task default, QA settings
+    and bagport version.
 
     Re-running a flow after a failure skips the episodes that already finished.
     """
@@ -212,6 +227,7 @@ def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
         and existing.contract_sha256 == request.contract_sha256
         and existing.default_task == request.default_task
         and existing.qa_sha256 == request.qa_sha256
+        and existing.bagport_version == __version__  # another bagport may convert differently
     )
     if not same:
         return None
@@ -223,11 +239,15 @@ def _staged_features(
     sources: list[AlignedSource],
     sinks: _EpisodeSinks,
     clips: dict[str, Any],
+    reused: dict[str, ReusedClip],
 ) -> tuple[StagedFeature, ...]:
     out = []
     for feature in plan.features:
         mine = [s for s in sources if s.src.key == feature.key]
         topics = tuple(s.src.topic for s in mine)
+        if feature.key in reused:
+            out.append(replace(reused[feature.key].feature, sources=topics))
+            continue
         if feature.kind is FeatureKind.VIDEO:
             clip = clips[feature.key]
             camera = sinks.cameras[feature.key]
@@ -247,6 +267,29 @@ def _staged_features(
             )
         )
     return tuple(out)
+
+
+def _take_reused(
+    workdir: Path,
+    reused: dict[str, ReusedClip],
+    video_checks: list[CheckResult],
+    video_plots: dict[str, Any],
+    monitor: ValueMonitor,
+) -> dict[str, Any]:
+    """Copy the reused clips into the episode and add their QA results; returns the extra QA plots."""
+    plots: dict[str, Any] = {}
+    for key, clip in reused.items():
+        fs, path = url_to_fs(clip.clip_uri)
+        fs.get_file(path, str(workdir / "videos" / f"{key}.mp4"))
+        video_checks.extend(clip.checks)
+        if clip.fidelity_plot is not None:
+            video_plots[key] = clip.fidelity_plot
+    if video_plots:
+        plots["fidelity"] = video_plots
+    means = {key: clip.image_means for key, clip in reused.items() if clip.image_means is not None}
+    if means:
+        plots["image_means"] = {**monitor.plots()["image_means"], **means}
+    return plots
 
 
 def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:

@@ -2,8 +2,9 @@
 
 min of mins, max of maxes, count-weighted mean, pooled variance; quantiles are the
 count-weighted mean of per-episode quantiles, as LeRobot 0.6.1 does (an
-approximation for vectors).  Image quantiles are exact: they come from the
-summed pixel histograms.
+approximation for vectors: the dataset writer replaces them with
+:mod:`bagport.stats.quantiles`, within one bin).  Image quantiles are exact: they
+come from the summed pixel histograms.
 """
 
 from __future__ import annotations

@@ -21,12 +21,26 @@ from bagport.errors import BagportError
 __all__ = ["main"]
 
 
+def _msg_definitions(args: argparse.Namespace) -> dict[str, str]:
+    from bagport.bags import read_msg_path  # noqa: PLC0415 - keep `--help` fast
+
+    return read_msg_path(args.msg_path) if args.msg_path else {}
+
+
 def _cmd_inspect(args: argparse.Namespace) -> int:
     from bagport.bags import format_bag_info, open_bag  # noqa: PLC0415 - keep `--help` fast
 
+    definitions = _msg_definitions(args)
     for uri in args.uri:
-        with open_bag(uri) as reader:
+        with open_bag(uri, msg_definitions=definitions) as reader:
             print(format_bag_info(reader.info))
+            read = reader.transfer
+            if read.access != "local":
+                print(
+                    f"Read:              {read.access}, {read.bytes_read} bytes in {read.requests} requests"
+                )
+            for topic, msgtype in sorted(reader.undefined_types.items()):
+                print(f"  type defined nowhere: {topic} ({msgtype}); give its .msg with --msg-path DIR")
     return 0
 
 
@@ -96,6 +110,8 @@ def _convert(args: argparse.Namespace) -> int:
         qa=args.qa,
         on_qa_fail=args.on_qa_fail,
         keep_failed=args.keep_failed,
+        msg_path=args.msg_path,
+        fail_fast=args.fail_fast,
     )
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
@@ -126,7 +142,9 @@ def _convert(args: argparse.Namespace) -> int:
 def _cmd_qa(args: argparse.Namespace) -> int:
     from bagport.episode.score import score_manifest  # noqa: PLC0415
 
-    entries = score_manifest(args.manifest, args.contract, args.qa, workers=args.workers)
+    entries = score_manifest(
+        args.manifest, args.contract, args.qa, workers=args.workers, msg_definitions=_msg_definitions(args)
+    )
     for entry in entries:
         qa = entry.qa
         print(f"{qa.verdict:4s} {qa.score:.2f}  bags[{entry.manifest_entry}] {qa.bag_uri}: {qa.headline()}")
@@ -168,8 +186,9 @@ def _cmd_contract_check(args: argparse.Namespace) -> int:
 
     plan = load_contract(args.contract)
     bags = args.bag or [None]
+    definitions = _msg_definitions(args)
     for bag in bags:
-        rows = describe_features(plan, bag)
+        rows = describe_features(plan, bag, definitions)
         print(f"{args.contract}" + (f" against {bag}" if bag else "") + ": OK")
         print(format_feature_table(plan, rows))
     return 0
@@ -179,7 +198,7 @@ def _cmd_contract_init(args: argparse.Namespace) -> int:
     from bagport.bags import open_bag  # noqa: PLC0415
     from bagport.contract.draft import draft_contract  # noqa: PLC0415
 
-    with open_bag(args.bag) as reader:
+    with open_bag(args.bag, msg_definitions=_msg_definitions(args)) as reader:
         text = draft_contract(reader.info, robot_type=args.robot_type, fps=args.fps)
     if args.out:
         out = Path(args.out)
@@ -257,6 +276,11 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="keep episodes labelled failed or discarded by episode events (default: leave them out, listed)",
     )
+    convert.add_argument(
+        "--fail-fast",
+        action="store_true",
+        help="stop at the first bag that fails to convert, writing nothing (default: report it, convert the others)",
+    )
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(
         "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
@@ -303,6 +327,12 @@ def _parser() -> argparse.ArgumentParser:
     synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
     synth.add_argument("--seed", type=int, default=0)
     synth.set_defaults(func=_cmd_synth)
+    for command in (convert, qa, inspect, check, init):
+        command.add_argument(
+            "--msg-path",
+            default=None,
+            help="folder of .msg files (<pkg>/msg/<Type>.msg) for message types the bags do not embed",
+        )
     return parser
 
 

@@ -10,7 +10,7 @@ from typing import Any
 from prefect import flow, get_run_logger, tags
 from prefect.client.schemas.objects import State
 from prefect.events.worker import EventsWorker
-from prefect.futures import as_completed
+from prefect.futures import PrefectFuture, as_completed
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
 from prefect.states import Failed
@@ -20,7 +20,7 @@ from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.dataset.history import dataset_report
 from bagport.episode import EpisodeRequest
-from bagport.errors import BagportError
+from bagport.errors import BagportError, QualityError
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
@@ -52,6 +52,15 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         return dataset_report(config.output)
     requests, failures = _segment(plan)
     unsegmented = len(failures)  # bags that could not even be split into episodes
+    if failures and config.fail_fast:
+        first = failures[0]
+        message = (
+            f"bags[{first.manifest_entry}] {first.bag_uri} could not be split into episodes ({first.error}) "
+            f"and --fail-fast is set: the run stopped and nothing was written at {config.output}. Fix: correct "
+            "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
+        )
+        logger.error("%s", message)
+        return Failed(message=message)
     futures = []
     for request in requests:
         label = request.name
@@ -59,9 +68,21 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
             futures.append(convert_episode_task.submit(request.to_dict(), label=label))
     progress = Progress(len(futures))
+    request_of = {id(f): r for f, r in zip(futures, requests, strict=True)}
     for done in as_completed(futures):
         done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
         progress.advance()
+        stop = _fail_fast_reason(plan, request_of[id(done)], done) if config.fail_fast else None
+        if stop is not None:
+            unfinished = _cancel_unfinished(futures)
+            message = (
+                f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {len(futures)} episode(s) were "
+                f"not finished) and nothing was written at {config.output}. Finished episodes stay in the staging "
+                f"store {config.resolved_staging()} and a re-run reuses them. Fix: correct or remove that bag, "
+                "or leave out --fail-fast to convert the others and list the failures."
+            )
+            logger.error("%s", message)
+            return Failed(message=message)
     staged: list[dict[str, Any]] = []
     for request, future in zip(requests, futures, strict=True):
         state = future.state
@@ -112,6 +133,34 @@ def _segment(plan: RunPlan) -> tuple[list[EpisodeRequest], list[EpisodeFailure]]
             failures.append(EpisodeFailure.of(request, f"no episode found in the bag ({reasons})"))
         requests += [EpisodeRequest(**item) for item in result["requests"]]
     return requests, failures
+
+
+def _fail_fast_reason(plan: RunPlan, request: EpisodeRequest, future: PrefectFuture[Any]) -> str | None:
+    """Why ``--fail-fast`` stops the run after this episode: its conversion failed, or it failed QA
+    under ``fail_run`` (the run fails anyway); ``None`` to go on."""
+    where = f"bags[{request.manifest_entry}] {request.bag_uri} {QualityError.MARKER}"
+    state = future.state
+    if not state.is_completed():
+        return f"{where} ({state.message or state.name})"
+    result = future.result()
+    if plan.qa.on_fail == "fail_run" and isinstance(result, dict) and result.get("qa_verdict") == "fail":
+        return f"{where} (QA verdict fail, on_fail is 'fail_run')"
+    return None
+
+
+def _cancel_unfinished(futures: list[PrefectFuture[Any]]) -> int:
+    """Cancel the episodes not finished yet; how many there were.
+
+    Pending ones never start; one already running on a process or thread finishes and stages (a
+    staged episode is complete or absent: ``episode.json`` is written last).
+    """
+    unfinished = 0
+    for future in futures:
+        wrapped = getattr(future, "wrapped_future", None)  # a concurrent.futures or distributed future
+        if wrapped is not None and not wrapped.done():
+            wrapped.cancel()
+            unfinished += 1
+    return unfinished
 
 
 @contextmanager

@@ -47,11 +47,18 @@ def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any] 
     except BagportError as err:
         get_run_logger().error("%s: %s", label, err)
         return Failed(message=str(err))
-    get_run_logger().info("%s: %d frames staged at %s", label, summary.frames, summary.dir_uri)
+    read = summary.bag_read
+    get_run_logger().info(
+        "%s: %d frames staged at %s (bag %s, %s bytes read)",
+        label, summary.frames, summary.dir_uri, read.get("access"), read.get("bytes_read"),
+    )  # fmt: skip
+    for warning in read.get("warnings", ()):
+        get_run_logger().warning("%s: %s", label, warning)
     return {
         "episode_id": summary.episode_id,
         "dir_uri": summary.dir_uri,
         "bag_uri": summary.bag_uri,
         "frames": summary.frames,
         "tasks": list(summary.tasks),
+        "qa_verdict": summary.qa.get("verdict"),
     }

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import os
+from collections.abc import Iterator
 from pathlib import Path
+
+import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 REALBAGS = REPO.parent / "shared" / "realbags"
@@ -14,3 +17,13 @@ os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
 os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
 os.environ.setdefault("HF_HOME", str(REPO / ".prefect" / "hf"))
 os.environ["HF_HUB_OFFLINE"] = "1"
+
+
+@pytest.fixture(scope="module")
+def s3_env() -> Iterator[dict[str, str]]:
+    """A real S3-compatible HTTP endpoint on loopback (moto's server), and the standard AWS variables
+    pointing at it (also in ``os.environ`` while the module's tests run)."""
+    from tests.s3 import moto_s3  # noqa: PLC0415 - moto only for the S3 tests
+
+    with moto_s3() as env:
+        yield env

@@ -62,6 +62,16 @@ class ConvertConfig(BaseModel):
         default=False,
         description="Keep episodes labelled failed or discarded by episode events (default: leave them out).",
     )
+    msg_path: str | None = Field(
+        default=None,
+        description="Folder of .msg files (<pkg>/msg/<Type>.msg) for types the bags do not embed; "
+        "read once and sent to the workers with each episode.",
+    )
+    fail_fast: bool = Field(
+        default=False,
+        description="Stop the run at the first bag that fails to convert (or fails QA under fail_run); "
+        "default: the bag is reported and the other episodes continue.",
+    )
 
     @model_validator(mode="after")
     def _one_bag_source(self) -> ConvertConfig:

@@ -6,13 +6,21 @@ type, joint name or field shows up in seconds, with the fix.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
-from bagport.bags import open_bag
-from bagport.contract import ContractPlan, FeatureKind
-from bagport.decode import decode_image, make_extractor, resize_rgb
+from bagport.bags import BagReader, open_bag
+from bagport.contract import ContractPlan, FeatureKind, SourceSpec
+from bagport.decode import (
+    child_frames,
+    decode_image,
+    find_transform,
+    image_channels,
+    make_extractor,
+    resize_image,
+)
 from bagport.episode.checks import check_bag_fits
-from bagport.errors import DecodeError
+from bagport.errors import ContractError, DecodeError
 
 __all__ = ["FeatureRow", "describe_features", "format_feature_table"]
 
@@ -32,19 +40,16 @@ def _source_text(topic: str, msgtype: str, strategy: str, stamp: str | None, fil
     return f"{topic} ({msgtype}) {strategy}/{stamp or 'auto'}/{fill}"
 
 
-def describe_features(plan: ContractPlan, bag_uri: str | None = None) -> list[FeatureRow]:
+def describe_features(
+    plan: ContractPlan, bag_uri: str | None = None, msg_definitions: Mapping[str, str] | None = None
+) -> list[FeatureRow]:
     """The feature table; with ``bag_uri`` every topic, type, joint and field is checked against the bag
     and shapes and names are resolved from its first messages."""
     first: dict[str, object] = {}
     if bag_uri is not None:
-        with open_bag(bag_uri) as reader:
+        with open_bag(bag_uri, msg_definitions=msg_definitions) as reader:
             check_bag_fits(reader.info, plan)
-            wanted = {s.topic for s in plan.sources}
-            for message in reader.messages(tuple(wanted)):
-                if message.topic not in first:
-                    first[message.topic] = message.msg()
-                if len(first) == len(wanted):
-                    break
+            first = _first_messages(reader, plan)
     rows = []
     for feature in plan.features:
         sources = tuple(
@@ -59,19 +64,19 @@ def describe_features(plan: ContractPlan, bag_uri: str | None = None) -> list[Fe
                 except DecodeError as err:
                     raise err.located(uri=bag_uri or "", topic=src.topic, t_ns=0) from err
                 if src.resize_hw:
-                    rgb = resize_rgb(rgb, *src.resize_hw)
-                shape = (int(rgb.shape[0]), int(rgb.shape[1]), 3)
+                    rgb = resize_image(rgb, *src.resize_hw)
+                shape = (int(rgb.shape[0]), int(rgb.shape[1]), image_channels(rgb))
             rows.append(FeatureRow(feature.key, "video", shape, ("height", "width", "channels"), sources))
             continue
         names: list[str] = []
         resolved = True
         for src in feature.sources:
-            if src.topic in first:
-                extractor = make_extractor(src, first[src.topic])
+            if src.stream in first:
                 try:
-                    extractor(first[src.topic])
+                    extractor = make_extractor(src, first[src.stream])
+                    extractor(first[src.stream])
                 except DecodeError as err:
-                    raise err.located(uri=bag_uri or "", topic=src.topic, t_ns=0) from err
+                    raise _in_contract(err, plan, src, bag_uri or "") from err
                 names.extend(extractor.names)
             elif src.names:
                 names.extend(src.names)
@@ -82,6 +87,48 @@ def describe_features(plan: ContractPlan, bag_uri: str | None = None) -> list[Fe
             FeatureRow(feature.key, feature.dtype, shape_v, tuple(names) if resolved else None, sources)
         )
     return rows
+
+
+def _first_messages(reader: BagReader, plan: ContractPlan) -> dict[str, object]:
+    """The first message of every stream (a TF stream's first message carrying its transform)."""
+    filters = plan.stream_filters()
+    wanted = set(plan.streams())
+    first: dict[str, object] = {}
+    frames_seen: dict[str, None] = {}
+    for message in reader.messages(tuple(dict.fromkeys(s.topic for s in plan.sources))):
+        for stream in wanted - first.keys():
+            spec = filters.get(stream)
+            if spec is None and stream == message.topic:
+                first[stream] = message.msg()
+            elif spec is not None and spec.topic == message.topic:
+                if find_transform(message.msg(), spec.child_frame, spec.parent_frame) is not None:
+                    first[stream] = message.msg()
+                else:
+                    frames_seen.update(dict.fromkeys(child_frames(message.msg())))
+        if len(first) == len(wanted):
+            break
+    for src in plan.sources:
+        if src.child_frame is not None and src.stream not in first:
+            raise ContractError(
+                f"no message on {src.topic} in {reader.info.uri} carries a transform to child frame "
+                f"{src.child_frame!r} (transforms seen: {', '.join(list(frames_seen)[:30]) or 'none'})",
+                file=plan.source_name,
+                line=src.line,
+                field=f"{src.section}[key={src.key}].selector.child_frame",
+                fix="use a frame the bag publishes.",
+            )
+    return first
+
+
+def _in_contract(err: DecodeError, plan: ContractPlan, src: SourceSpec, bag_uri: str) -> ContractError:
+    """A selector that does not fit the bag's messages is a contract mistake: say where it is."""
+    return ContractError(
+        f"{err.what} (first message on {src.topic} in {bag_uri})",
+        file=plan.source_name,
+        line=src.line,
+        field=f"{src.section}[key={src.key}].selector",
+        fix=err.fix,
+    )
 
 
 def format_feature_table(plan: ContractPlan, rows: list[FeatureRow]) -> str:

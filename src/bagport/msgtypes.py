@@ -19,6 +19,11 @@ class RosType(StrEnum):
     INT32 = "std_msgs/msg/Int32"
     INT64 = "std_msgs/msg/Int64"
     BOOL = "std_msgs/msg/Bool"
+    INT32_MULTI_ARRAY = "std_msgs/msg/Int32MultiArray"
+    JOY = "sensor_msgs/msg/Joy"
+    JOINT_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
+    TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+    MULTI_DOF_COMMAND = "control_msgs/msg/MultiDOFCommand"
 
 
 IMAGE_TYPES = frozenset({RosType.IMAGE.value, RosType.COMPRESSED_IMAGE.value})

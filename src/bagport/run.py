@@ -17,11 +17,12 @@ import fsspec
 from fsspec.core import url_to_fs
 
 from bagport import __version__
-from bagport.bags import source_stamp
+from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.history import converted_bags
+from bagport.dataset.remote import recover_remote_publish
 from bagport.dataset.write import recover_interrupted_append
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
@@ -82,6 +83,8 @@ def plan_run(config: ConvertConfig) -> RunPlan:
         assert config.manifest is not None  # the config validates that one of the two is given
         manifest = load_manifest(config.manifest)
     fs, out_path = url_to_fs(config.output)
+    if not is_local(fs) and fs.exists(out_path):
+        recover_remote_publish(config.output)  # a crashed publish: back to the previous version (or nothing)
     done: set[tuple[str, str]] = set()
     if config.append and fs.exists(out_path):
         if is_local(fs):
@@ -93,6 +96,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             "--overwrite to replace it (the old dataset stays until the new one is complete)."
         )
     staging = config.resolved_staging()
+    msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(bag.uri, contract_text, config.encoder, window_key(bag.window)),
@@ -106,6 +110,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             metadata=bag.metadata,
             qa=qa.model_dump(mode="json"),
             **bag.window,
+            msg_definitions=msg_definitions,
         )
         for bag in manifest.bags
         if not done or (bag.uri, source_stamp(bag.uri)) not in done

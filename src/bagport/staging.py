@@ -87,6 +87,12 @@ class EpisodeSummary:
     label: str | None = None
     """``success``, ``failed``, ``discarded`` (episode events), or ``None``."""
     note: str = ""
+    bag_read: dict[str, Any] = field(default_factory=dict)
+    """How the bag was read: access (local, download, ranged), bytes_read, requests, warnings."""
+    clip_keys: dict[str, str] = field(default_factory=dict)
+    """Per camera: what its clip depends on (``bagport.episode.reuse``); equal keys, equal clips."""
+    reused_clips: dict[str, str] = field(default_factory=dict)
+    """Per camera whose clip was copied from an earlier staged episode of the bag: that episode's id."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

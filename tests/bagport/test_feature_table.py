@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from bagport.contract import load_contract, parse_contract
-from bagport.errors import ContractError, DecodeError
+from bagport.errors import ContractError
 from bagport.feature_table import describe_features, format_feature_table
 from bagport.synth import EpisodeSpec, write_episode_bag
 from flows.cli import main
@@ -31,7 +31,9 @@ def test_unknown_joint_and_missing_topic_are_caught_before_converting(tmp_path: 
     write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=0.3))
     plan = parse_contract(SAMPLE_CONTRACT.read_text().replace("position.j6]", "position.elbow]", 1), "c.yaml")
     with pytest.raises(
-        DecodeError, match=r"joint\(s\) \['elbow'\] not in this JointState message.*topic=/joint_states"
+        ContractError,
+        match=r"c\.yaml:6 \(observations\[key=observation\.state\]\.selector\): joint\(s\) \['elbow'\] not in "
+        r"this JointState message \(it has \['j1', 'j2', 'j3', 'j4', 'j5', 'j6'\]\) \(first message on /joint_states",
     ):
         describe_features(plan, str(tmp_path / "ep"))
     plan = parse_contract(SAMPLE_CONTRACT.read_text().replace("/cmd", "/command"), "c.yaml")

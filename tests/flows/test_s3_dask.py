@@ -5,53 +5,19 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import subprocess
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import s3fs
-from moto.server import ThreadedMotoServer
 
 from bagport.dataset.validate import validate_dataset
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import REPO, SAMPLE_CONTRACT
+from tests.s3 import SECRET
 
 pytestmark = pytest.mark.slow
-
-SECRET = "bagport-test-secret-key"
-
-
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
-@pytest.fixture(scope="module")
-def s3_env() -> Iterator[dict[str, str]]:
-    port = _free_port()
-    server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
-    server.start()
-    env = {
-        "AWS_ACCESS_KEY_ID": "bagport-test",
-        "AWS_SECRET_ACCESS_KEY": SECRET,
-        "AWS_DEFAULT_REGION": "us-east-1",
-        "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}",
-    }
-    saved = {k: os.environ.get(k) for k in env}
-    os.environ.update(env)
-    try:
-        yield env
-    finally:
-        for key, value in saved.items():
-            if value is None:
-                os.environ.pop(key, None)
-            else:
-                os.environ[key] = value
-        server.stop()
 
 
 def test_s3_bags_staging_and_output_on_dask(tmp_path: Path, s3_env: dict[str, str]) -> None:
@@ -87,3 +53,8 @@ def test_s3_bags_staging_and_output_on_dask(tmp_path: Path, s3_env: dict[str, st
         "s3://fleet/2026-11-20/ep_ros1.bag",
     ]
     assert SECRET not in run  # credentials are never written into provenance
+    access = {e["bag_uri"]: e["bag_read"]["access"] for e in json.loads(run)["episodes"]}
+    assert access == {
+        "s3://fleet/2026-11-20/ep_mcap": "ranged",
+        "s3://fleet/2026-11-20/ep_ros1.bag": "download",
+    }

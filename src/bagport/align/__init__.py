@@ -2,16 +2,23 @@
 
 from __future__ import annotations
 
-from bagport.align.grid import NS_PER_S, grid_ticks_ns, tick_count
+from bagport.align.grid import NS_PER_S, grid_drift_ns, grid_ticks_ns, reference_ticks_ns, tick_count
 from bagport.align.select import STRATEGIES, Selection, hold_fill, select_for_ticks, select_hold
+from bagport.align.slerp import QuaternionGroup, blend, quaternion_groups, slerp
 
 __all__ = [
     "NS_PER_S",
     "STRATEGIES",
+    "QuaternionGroup",
     "Selection",
+    "blend",
+    "grid_drift_ns",
     "grid_ticks_ns",
     "hold_fill",
+    "quaternion_groups",
+    "reference_ticks_ns",
     "select_for_ticks",
     "select_hold",
+    "slerp",
     "tick_count",
 ]

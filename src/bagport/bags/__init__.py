@@ -8,6 +8,7 @@ from bagport.bags.reader import BagReader, open_bag
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.stamp import source_stamp
 from bagport.bags.text import format_bag_info
+from bagport.bags.typesources import read_msg_path
 from bagport.bags.window import BagWindow
 
 __all__ = [
@@ -20,5 +21,6 @@ __all__ = [
     "detect_storage",
     "format_bag_info",
     "open_bag",
+    "read_msg_path",
     "source_stamp",
 ]

@@ -7,6 +7,7 @@ from pathlib import Path
 import yaml
 
 from bagport.bags.records import Storage
+from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
 __all__ = ["detect_storage"]
@@ -16,7 +17,7 @@ MCAP_MAGIC = b"\x89MCAP0\r\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
 
 
-def _file_storage(path: Path, uri: str) -> Storage:
+def _file_storage(path: Path | RemotePath, uri: str) -> Storage:
     try:
         with path.open("rb") as handle:
             head = handle.read(16)
@@ -45,7 +46,7 @@ def _file_storage(path: Path, uri: str) -> Storage:
     )
 
 
-def detect_storage(path: Path, uri: str) -> Storage:
+def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
     """Storage of a local bag: a rosbag2 folder (by metadata or files) or a single file (by magic)."""
     if not path.exists():
         raise BagReadError(
@@ -64,7 +65,9 @@ def detect_storage(path: Path, uri: str) -> Storage:
             ) from err
         if storage_id in (Storage.MCAP, Storage.SQLITE3):
             return Storage(storage_id)
-    files = sorted(p for p in path.iterdir() if p.is_file() and p.suffix in (".mcap", ".db3"))
+    files = sorted(
+        (p for p in path.iterdir() if p.suffix in (".mcap", ".db3") and p.is_file()), key=lambda p: p.name
+    )
     if not files:
         raise BagReadError(
             "is a folder without metadata.yaml, .mcap or .db3 files",

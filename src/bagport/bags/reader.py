@@ -11,23 +11,30 @@ from types import TracebackType
 from typing import Any, Protocol
 
 import yaml
+from backports import zstd
 from fsspec.core import url_to_fs
-from rosbags.highlevel import AnyReader, AnyReaderError
+from rosbags.highlevel import AnyReaderError
 from rosbags.interfaces import Nodetype
 from rosbags.rosbag1 import ReaderError as Ros1ReaderError
 from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags.detect import detect_storage
+from bagport.bags.layout import BagPath, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
+from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
+from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
+from bagport.bags.typeload import TolerantAnyReader, is_service_event
+from bagport.bags.typesources import complete_typestore, parse_msg_definitions, undefined_type_error
 from bagport.errors import BagportError, BagReadError, TransientError
 from bagport.uris import is_local
 
 __all__ = ["BagReader", "open_bag"]
 
 _HEADER = "std_msgs/msg/Header"
-_SUFFIX = {Storage.ROS1: ".bag", Storage.MCAP: ".mcap", Storage.SQLITE3: ".db3"}
+RANGED_STORAGES = frozenset({Storage.MCAP})
+"""Read in place on remote stores (summary + chunk index); other formats are downloaded first."""
 _ROSBAGS_ERRORS = (AnyReaderError, Ros1ReaderError, Ros2ReaderError)
 
 
@@ -35,13 +42,23 @@ class BagReader(Protocol):
     @property
     def info(self) -> BagInfo: ...
 
+    @property
+    def transfer(self) -> TransferStats: ...
+
     def messages(
         self, topics: Sequence[str] | None = None, *, start_ns: int | None = None, stop_ns: int | None = None
     ) -> Iterator[BagMessage]:
         """Messages in log-time order; only those logged in ``[start_ns, stop_ns)`` when given."""
         ...
 
+    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]: ...
+
     def close(self) -> None: ...
+
+    @property
+    def undefined_types(self) -> dict[str, str]:
+        """``{topic: msgtype}`` of topics whose type no source defines (reading them fails)."""
+        ...
 
     def __enter__(self) -> BagReader: ...
 
@@ -50,7 +67,7 @@ class BagReader(Protocol):
     ) -> None: ...
 
 
-def _custom_data(path: Path) -> dict[str, str]:
+def _custom_data(path: BagPath) -> dict[str, str]:
     metadata = path / "metadata.yaml" if path.is_dir() else None
     if metadata is None or not metadata.is_file():
         return {}
@@ -62,38 +79,40 @@ def _custom_data(path: Path) -> dict[str, str]:
     return {str(k): str(v) for k, v in dict(data).items()}
 
 
-def _reader_paths(path: Path, storage: Storage, scratch: Path) -> list[Path]:
-    """Paths for AnyReader, which goes by file name: files whose suffix does not match their content
-    (a ROS 1 bag without ``.bag``, a rosbag2 folder named ``*.bag``) are linked under a fitting name."""
-    if path.is_file():
-        suffix = _SUFFIX[storage]
-        if path.suffix == suffix:
-            return [path]
-        link = scratch / f"bag{suffix}"
-        link.symlink_to(path.resolve())
-        return [link]
-    if (path / "metadata.yaml").is_file():
-        if path.suffix == ".bag":
-            link = scratch / "bag"
-            link.symlink_to(path.resolve(), target_is_directory=True)
-            return [link]
-        return [path]
-    suffix = ".mcap" if storage is Storage.MCAP else ".db3"
-    return sorted(p for p in path.iterdir() if p.suffix == suffix)
-
-
 class RosbagsReader:
     """``BagReader`` over rosbags' AnyReader: rosbag2 (MCAP, SQLite) and ROS 1."""
 
-    def __init__(self, uri: str, path: Path, storage: Storage, cleanup: Path | None) -> None:
+    def __init__(
+        self,
+        uri: str,
+        path: BagPath,
+        storage: Storage,
+        cleanup: Path | None,
+        remote: RemoteBag | None = None,
+        msg_definitions: Mapping[str, str] | None = None,
+    ) -> None:
         self._uri = uri
         self._cleanup = cleanup
+        self._remote = remote
         self._scratch = Path(tempfile.mkdtemp(prefix="bagport-link-"))
-        paths = _reader_paths(path, storage, self._scratch)
+        try:
+            plan = plan_reads(path, storage, self._scratch, uri)
+        except BaseException:
+            self.close()
+            raise
+        self._decompress = plan.message_compression
+        self._mcap_files = plan.data_files if storage is Storage.MCAP else []
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
-            self._reader: Any = AnyReader(paths, default_typestore=get_typestore(store))
+            extra = parse_msg_definitions(msg_definitions or {})
+            bundled = get_typestore(store)
+            self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled)
             self._reader.open()
+            msgtypes = {c.msgtype for c in self._reader.connections}
+            lacking = complete_typestore(self._reader.typestore, msgtypes, extra, bundled)
+        except BagportError:
+            self.close()
+            raise
         except _ROSBAGS_ERRORS as err:
             self.close()
             raise BagReadError(f"cannot be opened: {err}", uri=uri, fix=_fix_for(err)) from err
@@ -104,28 +123,52 @@ class RosbagsReader:
                 uri=uri,
                 fix="the bag is corrupt or truncated.",
             ) from err
-        files = [p for p in (path.iterdir() if path.is_dir() else [path]) if p.is_file()]
+        except BaseException:  # TransientError from a ranged read, KeyboardInterrupt
+            self.close()
+            raise
         counts: dict[str, tuple[str, int]] = {}
         for conn in self._reader.connections:
             msgtype, count = counts.get(conn.topic, (conn.msgtype, 0))
             counts[conn.topic] = (msgtype, count + int(conn.msgcount))
+        self._promised = {topic: count for topic, (_, count) in counts.items()}
         message_count = int(self._reader.message_count)
+        size_bytes = sum(p.stat().st_size for p in plan.files)
         self._info = BagInfo(
             uri=uri,
             storage=storage,
-            files=tuple(sorted(p.name for p in files)),
-            size_bytes=sum(p.stat().st_size for p in files),
+            files=tuple(sorted(p.name for p in plan.files)),
+            size_bytes=size_bytes,
             start_ns=int(self._reader.start_time) if message_count else 0,
             end_ns=int(self._reader.end_time) if message_count else 0,
             message_count=message_count,
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
             custom_data=_custom_data(path),
+            warnings=(
+                *plan.warnings,
+                *(f"type {t} cannot be loaded: {why}" for t, why in sorted(self._reader.unloadable.items())),
+            ),
         )
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
+        self._lacking = lacking
+        if remote is not None:
+            self._transfer = remote.stats
+        elif cleanup is not None:
+            self._transfer = TransferStats("download", bytes_read=size_bytes, requests=len(plan.files))
+        else:
+            self._transfer = TransferStats("local")
+
+    @property
+    def transfer(self) -> TransferStats:
+        """What reading this bag cost on its store so far (bytes, requests, how it was accessed)."""
+        return self._transfer
 
     @property
     def info(self) -> BagInfo:
         return self._info
+
+    @property
+    def undefined_types(self) -> dict[str, str]:
+        return {c.topic: c.msgtype for c in self._reader.connections if c.msgtype in self._lacking}
 
     def _header_layout(self, msgtype: str) -> str | None:
         fields = self._reader.typestore.fielddefs.get(msgtype)
@@ -134,28 +177,77 @@ class RosbagsReader:
         _, (nodetype, detail) = fields[1][0]
         return self._layout if nodetype == Nodetype.NAME and detail == _HEADER else None
 
+    def _connections(self, topics: Sequence[str] | None) -> list[Any]:
+        """Connections to read: the requested topics, or every data topic (no service events,
+        no types that could not be loaded). A requested topic of an unloadable type is an error."""
+        unloadable: dict[str, str] = self._reader.unloadable
+        if topics is None:
+            return [
+                c
+                for c in self._reader.connections
+                if c.msgtype not in unloadable and not is_service_event(c.topic, c.msgtype)
+            ]
+        wanted = frozenset(topics)
+        conns = [c for c in self._reader.connections if c.topic in wanted]
+        for conn in conns:
+            if conn.msgtype in unloadable:
+                raise BagReadError(
+                    f"topic {conn.topic} has type {conn.msgtype}, which cannot be loaded: "
+                    f"{unloadable[conn.msgtype]}",
+                    uri=self._uri,
+                    topic=conn.topic,
+                    fix="provide the type's .msg definition, or drop the topic from the contract.",
+                )
+        return conns
+
     def messages(
         self, topics: Sequence[str] | None = None, *, start_ns: int | None = None, stop_ns: int | None = None
     ) -> Iterator[BagMessage]:
-        wanted = None if topics is None else frozenset(topics)
-        conns = [c for c in self._reader.connections if wanted is None or c.topic in wanted]
+        conns = self._connections(topics)
         if not conns:
             return
+        for conn in conns:
+            if conn.msgtype in self._lacking:
+                raise undefined_type_error(self._uri, conn.topic, conn.msgtype, self._lacking[conn.msgtype])
         layouts = {c.msgtype: self._header_layout(c.msgtype) for c in conns}
         deserialize = self._reader.deserialize
+        yielded = dict.fromkeys((c.topic for c in conns), 0)
         try:
             for conn, log_ns, raw in self._reader.messages(connections=conns, start=start_ns, stop=stop_ns):
+                payload = zstd.decompress(raw) if self._decompress else raw
+                yielded[conn.topic] += 1
                 yield BagMessage(
-                    conn.topic, conn.msgtype, int(log_ns), raw, deserialize, layouts[conn.msgtype]
+                    conn.topic, conn.msgtype, int(log_ns), payload, deserialize, layouts[conn.msgtype]
                 )
         except _ROSBAGS_ERRORS as err:
             raise BagReadError(f"reading failed: {err}", uri=self._uri, fix=_fix_for(err)) from err
-        except (OSError, ValueError, KeyError, IndexError, EOFError) as err:
+        except (OSError, ValueError, KeyError, IndexError, EOFError, zstd.ZstdError) as err:
             raise BagReadError(
                 f"reading failed ({type(err).__name__}: {err})",
                 uri=self._uri,
                 fix="the bag is corrupt or truncated.",
             ) from err
+        if start_ns is None and stop_ns is None:  # a window reads part of each topic
+            self._check_counts(yielded)
+
+    def _check_counts(self, yielded: dict[str, int]) -> None:
+        """Fewer messages than the index promises is an error naming the topic, never a short dataset."""
+        for topic, count in yielded.items():
+            promised = self._promised.get(topic, 0)
+            if count < promised:
+                raise BagReadError(
+                    f"yielded {count} messages on {topic}, its index promises {promised}",
+                    uri=self._uri,
+                    topic=topic,
+                    fix="the bag is truncated or its index is stale: reindex it "
+                    "(`ros2 bag reindex` / `rosbag reindex`).",
+                )
+
+    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]:
+        """Per topic ``(log_ns, publish_ns)`` in log order; empty when the storage has no publish time."""
+        if not self._mcap_files:
+            return {}
+        return mcap_publish_times_ns(self._mcap_files, topics, self._uri)
 
     def close(self) -> None:
         reader = getattr(self, "_reader", None)
@@ -163,6 +255,9 @@ class RosbagsReader:
             with contextlib.suppress(Exception):
                 reader.close()
         shutil.rmtree(self._scratch, ignore_errors=True)
+        remote = getattr(self, "_remote", None)
+        if remote is not None:
+            remote.close()
         if self._cleanup is not None:
             shutil.rmtree(self._cleanup, ignore_errors=True)
 
@@ -215,12 +310,49 @@ def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | N
     return local, scratch
 
 
-def open_bag(uri: str, *, storage_options: Mapping[str, Any] | None = None) -> BagReader:
-    """Open a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag from any fsspec URI."""
+def _open_ranged(
+    uri: str, storage_options: Mapping[str, Any], msg_definitions: Mapping[str, str] | None
+) -> RosbagsReader | None:
+    """A reader over a remote MCAP bag read in place with ranged reads; ``None`` to download it."""
+    try:
+        fs, path = url_to_fs(uri, **storage_options)
+    except (ValueError, ImportError):
+        return None
+    if is_local(fs):
+        return None
+    remote = RemoteBag(fs, uri)
+    try:
+        root = RemotePath(remote, path)
+        storage = detect_storage(root, uri)
+    except (BagportError, OSError):
+        remote.close()
+        return None  # the download path reports it with the right error class
+    if storage not in RANGED_STORAGES:
+        remote.close()
+        return None
+    return RosbagsReader(uri, root, storage, None, remote, msg_definitions)
+
+
+def open_bag(
+    uri: str,
+    *,
+    storage_options: Mapping[str, Any] | None = None,
+    msg_definitions: Mapping[str, str] | None = None,
+) -> BagReader:
+    """Open a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag from any fsspec URI.
+
+    A remote MCAP bag is read in place (its summary, then only the chunks holding the
+    topics asked for); other remote bags are downloaded to a private temp folder first.
+    ``msg_definitions`` (``{type name: .msg text}``, see :func:`bagport.bags.read_msg_path`) define
+    types the bag does not embed and no bundled type store has.
+    """
+    ranged = _open_ranged(uri, storage_options or {}, msg_definitions)
+    if ranged is not None:
+        return ranged
     local, cleanup = _fetch(uri, storage_options or {})
     try:
         storage = detect_storage(local, uri)
-        return RosbagsReader(uri, local, storage, cleanup)
+        return RosbagsReader(uri, local, storage, cleanup, None, msg_definitions)
     except BagportError:
         if cleanup is not None:
             shutil.rmtree(cleanup, ignore_errors=True)

@@ -37,6 +37,8 @@ class BagInfo:
     message_count: int
     topics: tuple[TopicInfo, ...]
     custom_data: dict[str, str] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    """What was odd about the bag and how it was read anyway (e.g. a stale metadata.yaml)."""
 
     @property
     def duration_ns(self) -> int:
@@ -55,4 +57,5 @@ class BagInfo:
             "end_ns": self.end_ns,
             "message_count": self.message_count,
             "topics": [{"name": t.name, "msgtype": t.msgtype, "count": t.count} for t in self.topics],
+            "warnings": list(self.warnings),
         }

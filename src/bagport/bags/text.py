@@ -46,4 +46,5 @@ def format_bag_info(info: BagInfo) -> str:
         )
     for key, value in sorted(info.custom_data.items()):
         lines.append(f"Custom data:       {key}: {value}")
+    lines.extend(f"Warning:           {warning}" for warning in info.warnings)
     return "\n".join(lines)

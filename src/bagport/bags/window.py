@@ -5,9 +5,13 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from types import TracebackType
 
+import numpy as np
+
 from bagport.bags.message import BagMessage
+from bagport.bags.publish import Int64Array
 from bagport.bags.reader import BagReader
 from bagport.bags.records import BagInfo
+from bagport.bags.remote import TransferStats
 
 __all__ = ["BagWindow"]
 
@@ -33,6 +37,21 @@ class BagWindow:
         start = self.start_ns if start_ns is None else max(start_ns, self.start_ns)
         stop = self.end_ns + 1 if stop_ns is None else min(stop_ns, self.end_ns + 1)
         return self._reader.messages(topics, start_ns=start, stop_ns=stop)
+
+    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]:
+        out = {}
+        for topic, (log_ns, publish_ns) in self._reader.publish_times_ns(topics).items():
+            inside = (log_ns >= self.start_ns) & (log_ns <= self.end_ns)
+            out[topic] = (np.asarray(log_ns[inside]), np.asarray(publish_ns[inside]))
+        return out
+
+    @property
+    def transfer(self) -> TransferStats:
+        return self._reader.transfer
+
+    @property
+    def undefined_types(self) -> dict[str, str]:
+        return self._reader.undefined_types
 
     def close(self) -> None:
         return None

@@ -13,6 +13,8 @@ _ACTION_WORDS = re.compile(r"cmd|command|target|goal|action|leader|desired|setpo
 _TASK_WORDS = re.compile(r"task|prompt|instruction|language|goal_text", re.IGNORECASE)
 _BOILERPLATE = {"image_raw", "image", "compressed", "color", "rgb", "image_rect", "image_color", "raw"}
 _ACTION_TYPES = {RosType.JOINT_STATE.value, "geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"}
+_COMMAND_TYPES = {RosType.JOINT_TRAJECTORY.value, RosType.MULTI_DOF_COMMAND.value}
+"""Types that only ever carry commands: an action whatever the topic is called."""
 
 
 def _camera_name(topic: str, taken: set[str]) -> str:
@@ -41,7 +43,9 @@ def draft_contract(info: BagInfo, *, robot_type: str = "my_robot", fps: int = 30
             unmapped.append(f"#   {topic.name} ({topic.msgtype}): no messages")
         elif topic.msgtype in IMAGE_TYPES:
             observations += _entry(f"observation.images.{_camera_name(topic.name, cameras)}", topic)
-        elif topic.msgtype in _ACTION_TYPES and _ACTION_WORDS.search(topic.name):
+        elif topic.msgtype in _COMMAND_TYPES or (
+            topic.msgtype in _ACTION_TYPES and _ACTION_WORDS.search(topic.name)
+        ):
             actions += [
                 "  - key: action",
                 "    publish:",
@@ -55,6 +59,10 @@ def draft_contract(info: BagInfo, *, robot_type: str = "my_robot", fps: int = 30
             )
         elif topic.msgtype == RosType.STRING and _TASK_WORDS.search(topic.name):
             tasks += _entry("task", topic)
+        elif topic.msgtype == RosType.TF_MESSAGE:
+            unmapped.append(
+                f"#   {topic.name} ({topic.msgtype}): map one transform with selector: {{child_frame: <frame>}}"
+            )
         else:
             unmapped.append(f"#   {topic.name} ({topic.msgtype})")
     lines = [

@@ -14,6 +14,13 @@ from bagport.yamlsource import explain_validation, load_yaml
 
 __all__ = ["load_contract", "parse_contract"]
 
+_FIELD_FIXES = {
+    "fps": "fps is the dataset's frame rate, a whole number of frames per second such as 30.",
+    "key": "use '.' to structure keys (observation.images.front); LeRobot forbids '/'.",
+    "type": "write the ROS type as 'pkg/msg/Type', e.g. sensor_msgs/msg/JointState.",
+    "topic": "ROS topic names are absolute: '/joint_states'.",
+}
+
 
 def _read_text(uri: str) -> str:
     try:
@@ -44,15 +51,16 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
     try:
         contract = Contract.model_validate(source.data)
     except pydantic.ValidationError as err:
-        problem = explain_validation(err, source, Contract, "see the contract format in the README.")
-        raise ContractError(
-            problem.what, file=name, line=problem.line, field=problem.field, fix=problem.fix
-        ) from err
-    plan = compile_contract(contract, name)
-    for feature in plan.features:
-        for src in feature.sources:
-            if src.decoder is not None:
-                resolve_decoder(src.decoder, where=f"{name} ({src.key} on {src.topic})")
+        default_fix = "see the contract format in the README."
+        problem = explain_validation(err, source, Contract, default_fix)
+        last = problem.field.rsplit(".", 1)[-1]
+        fix = _FIELD_FIXES.get(last, problem.fix) if problem.fix == default_fix else problem.fix
+        raise ContractError(problem.what, file=name, line=problem.line, field=problem.field, fix=fix) from err
+    plan = compile_contract(contract, name, source.line_of)
+    for src in plan.sources:
+        if src.decoder is not None:
+            field = f"{src.section}[key={src.key}].decoder"
+            resolve_decoder(src.decoder, file=name, line=src.line, field=field)
     return plan
 
 

@@ -11,7 +11,16 @@ from __future__ import annotations
 import re
 from typing import Annotated, Any, Literal
 
-from pydantic import AfterValidator, AliasChoices, BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt
+from pydantic import (
+    AfterValidator,
+    AliasChoices,
+    BaseModel,
+    ConfigDict,
+    Field,
+    PositiveFloat,
+    PositiveInt,
+    StrictInt,
+)
 
 __all__ = [
     "ActionEntry",
@@ -71,7 +80,7 @@ FeatureKey = Annotated[str, AfterValidator(_check_key)]
 Topic = Annotated[str, AfterValidator(_check_topic)]
 MsgType = Annotated[str, AfterValidator(_check_msgtype)]
 DecoderRef = Annotated[str, AfterValidator(_check_decoder)]
-StampSource = Literal["header", "receive"]
+StampSource = Literal["header", "receive", "publish"]
 
 
 class _Strict(BaseModel):
@@ -82,11 +91,24 @@ class Selector(_Strict):
     """Which dimensions of a message make up the feature, in order."""
 
     names: tuple[str, ...] = ()
+    child_frame: str | None = None
+    """tf2_msgs/msg/TFMessage only: the transform whose ``child_frame_id`` is this frame."""
+    parent_frame: str | None = None
+    """tf2_msgs/msg/TFMessage only, optional: and whose ``header.frame_id`` is this frame."""
+
+
+def _check_depth_range(bounds: tuple[float, float] | None) -> tuple[float, float] | None:
+    if bounds is not None and not 0 <= bounds[0] < bounds[1]:
+        raise ValueError(f"depth_range_m {list(bounds)} must be [min, max] metres with 0 <= min < max")
+    return bounds
 
 
 class ImageOptions(_Strict):
     resize: tuple[PositiveInt, PositiveInt] | None = None
     """Target ``[height, width]``."""
+    depth_range_m: Annotated[tuple[float, float] | None, AfterValidator(_check_depth_range)] = None
+    """Depth cameras only: ``[min, max]`` metres the 12-bit depth codes span (LeRobot's
+    ``depth_min``/``depth_max``; default ``[0.01, 10.0]``)."""
 
 
 class AlignOptions(_Strict):
@@ -95,6 +117,9 @@ class AlignOptions(_Strict):
     stamp: StampSource | None = None
     fill: Literal["fail", "hold", "zeros", "drop_frame"] = "fail"
     """What a frame without a valid message gets; never silent (recorded in provenance)."""
+    clock_offset_ms: float = 0.0
+    """How far this source's stamps run ahead of the other streams' (another machine's clock):
+    the source is sampled at ``tick + clock_offset_ms``.  QA's ``time.clock_offset_ms`` measures it."""
 
 
 class ObservationEntry(_Strict):
@@ -181,7 +206,7 @@ class EpisodesOptions(_Strict):
 
 class Contract(_Strict):
     robot_type: str = Field(validation_alias=AliasChoices("robot_type", "name"))
-    fps: PositiveInt = Field(default=30, validation_alias=AliasChoices("fps", "rate_hz"))
+    fps: StrictInt = Field(default=30, gt=0, validation_alias=AliasChoices("fps", "rate_hz"))
     observations: tuple[ObservationEntry, ...] = ()
     actions: tuple[ActionEntry, ...] = ()
     tasks: tuple[TaskEntry, ...] = ()
@@ -196,6 +221,12 @@ class Contract(_Strict):
     info: Any = None
     timestamp_source: StampSource | None = None
     max_duration_s: PositiveFloat | None = None
+    clock: str | None = None
+    """A feature key: one frame per message of that stream instead of the fixed grid (see README)."""
+    action_offset_ms: float | None = None
+    """The action at tick t is the command at t + offset (command-to-execution delay); may be negative."""
+    action_offset_frames: int | None = None
+    """The same offset in frames (``action_offset_ms = frames * 1000 / fps``)."""
     episodes: EpisodesOptions | None = None
     """bagport extension: episodes inside a bag (events, gaps, a done signal)."""
     default_task: str | None = None

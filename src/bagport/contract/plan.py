@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import NamedTuple
 
 from bagport.contract.model import (
     ActionEntry,
@@ -14,9 +16,29 @@ from bagport.contract.model import (
     TaskEntry,
 )
 from bagport.errors import ContractError
-from bagport.msgtypes import IMAGE_TYPES
+from bagport.msgtypes import IMAGE_TYPES, RosType
 
-__all__ = ["ContractPlan", "FeatureKind", "FeatureSpec", "SourceSpec", "compile_contract"]
+__all__ = [
+    "ContractPlan",
+    "FeatureKind",
+    "FeatureSpec",
+    "LineOf",
+    "SourceSpec",
+    "StreamFilter",
+    "compile_contract",
+]
+
+LineOf = Callable[[Sequence[int | str]], int | None]
+"""Maps a value path in the contract (``("observations", 2, "key")``) to its line in the file."""
+
+
+class StreamFilter(NamedTuple):
+    """Only the messages of ``topic`` carrying this transform are samples of the stream."""
+
+    topic: str
+    child_frame: str
+    parent_frame: str | None
+
 
 _NUMERIC_DTYPES = frozenset({"float32", "float64", "int32", "int64", "bool", "uint8", "int16", "float16"})
 DEFAULT_VECTOR_DTYPE = "float32"
@@ -43,6 +65,29 @@ class SourceSpec:
     resize_hw: tuple[int, int] | None
     decoder: str | None
     fill: str = "fail"
+    offset_ns: int = 0
+    """The source is sampled at ``tick + offset_ns``: ``action_offset_ms`` on actions plus ``align.clock_offset_ms``."""
+    depth_range_m: tuple[float, float] | None = None
+    """``image.depth_range_m``: the metres a depth camera's codes span (``None``: LeRobot's default)."""
+    line: int | None = None
+    """Line of the entry in the contract file, for errors."""
+    child_frame: str | None = None
+    parent_frame: str | None = None
+
+    @property
+    def stream(self) -> str:
+        """What the timeline tracks: the topic, or ``topic#child_frame`` for a TF lookup."""
+        return self.topic if self.child_frame is None else f"{self.topic}#{self.child_frame}"
+
+    @property
+    def stream_filter(self) -> StreamFilter | None:
+        if self.child_frame is None:
+            return None
+        return StreamFilter(self.topic, self.child_frame, self.parent_frame)
+
+    def where(self, source_name: str) -> str:
+        """``file:line`` of this entry, for error messages."""
+        return f"{source_name}:{self.line}" if self.line is not None else source_name
 
 
 @dataclass(frozen=True, slots=True)
@@ -71,6 +116,11 @@ class ContractPlan:
         return self.contract.robot_type
 
     @property
+    def clock(self) -> str | None:
+        """The feature key whose messages are the frames (``clock:``), or ``None`` for the fixed grid."""
+        return self.contract.clock
+
+    @property
     def sources(self) -> tuple[SourceSpec, ...]:
         return tuple(src for feature in self.features for src in feature.sources)
 
@@ -79,16 +129,28 @@ class ContractPlan:
         seen = dict.fromkeys([src.topic for src in self.sources] + [t.topic for t in self.task_topics])
         return tuple(seen)
 
+    def streams(self) -> tuple[str, ...]:
+        """Every stream the timeline tracks (a topic, or a TF child frame on a topic)."""
+        return tuple(dict.fromkeys(src.stream for src in self.sources))
+
+    def stream_filters(self) -> dict[str, StreamFilter]:
+        return {src.stream: f for src in self.sources if (f := src.stream_filter) is not None}
+
 
 def _source(
-    entry: ObservationEntry | ActionEntry | ScalarEntry, section: str, default_stamp: StampSource | None
+    entry: ObservationEntry | ActionEntry | ScalarEntry,
+    section: str,
+    default_stamp: StampSource | None,
+    offset_ns: int = 0,
+    line: int | None = None,
 ) -> SourceSpec:
     if isinstance(entry, ActionEntry):
         topic, msgtype = entry.publish.topic, entry.publish.type
     else:
         topic, msgtype = entry.topic, entry.type
     align = entry.align
-    resize = entry.image.resize if isinstance(entry, ObservationEntry) and entry.image else None
+    image = entry.image if isinstance(entry, ObservationEntry) else None
+    resize = image.resize if image else None
     return SourceSpec(
         key=entry.key,
         section=section,
@@ -101,7 +163,46 @@ def _source(
         resize_hw=(resize[0], resize[1]) if resize else None,
         decoder=entry.decoder,
         fill=align.fill if align else "fail",
+        offset_ns=offset_ns + (round(align.clock_offset_ms * 1_000_000) if align else 0),
+        depth_range_m=image.depth_range_m if image else None,
+        line=line,
+        child_frame=entry.selector.child_frame if entry.selector else None,
+        parent_frame=entry.selector.parent_frame if entry.selector else None,
     )
+
+
+def action_offset_ns(contract: Contract, source_name: str) -> int:
+    """``action_offset_ms`` or ``action_offset_frames`` in integer nanoseconds (0 when unset)."""
+    if contract.action_offset_ms is not None and contract.action_offset_frames is not None:
+        raise ContractError(
+            "sets both action_offset_ms and action_offset_frames",
+            file=source_name,
+            field="action_offset_frames",
+            fix="keep one of them.",
+        )
+    if contract.action_offset_frames is not None:
+        return contract.action_offset_frames * 1_000_000_000 // contract.fps
+    return round((contract.action_offset_ms or 0.0) * 1_000_000)
+
+
+def _check_frames(src: SourceSpec, section: str, source_name: str) -> None:
+    field = f"{section}[key={src.key}].selector"
+    if src.msgtype == RosType.TF_MESSAGE and src.child_frame is None and src.decoder is None:
+        raise ContractError(
+            f"{src.key!r} reads {src.topic} ({src.msgtype}), which carries many transforms: say which one",
+            file=source_name,
+            line=src.line,
+            field=f"{field}.child_frame",
+            fix="add 'selector: {child_frame: <frame>}' (optionally parent_frame), e.g. child_frame: tool0.",
+        )
+    if src.msgtype != RosType.TF_MESSAGE and (src.child_frame or src.parent_frame):
+        raise ContractError(
+            f"selector.child_frame / parent_frame only apply to {RosType.TF_MESSAGE}, not {src.msgtype}",
+            file=source_name,
+            line=src.line,
+            field=f"{field}.child_frame",
+            fix="remove them, or set 'type: tf2_msgs/msg/TFMessage'.",
+        )
 
 
 _SCALAR_TYPES = frozenset(f"std_msgs/msg/{name}" for name in ("Float32", "Float64", "Int32", "Int64", "Bool"))
@@ -114,6 +215,7 @@ def _check_align(src: SourceSpec, section: str, source_name: str) -> None:
         raise ContractError(
             f"align.strategy {src.strategy!r} on {src.topic} needs tol_ms",
             file=source_name,
+            line=src.line,
             field=f"{field}.tol_ms",
             fix="add e.g. 'tol_ms: 50', or use strategy 'hold'.",
         )
@@ -121,6 +223,7 @@ def _check_align(src: SourceSpec, section: str, source_name: str) -> None:
         raise ContractError(
             f"images cannot be interpolated ({src.key} on {src.topic})",
             file=source_name,
+            line=src.line,
             field=f"{field}.strategy",
             fix="use 'hold', 'asof' or 'nearest' for cameras.",
         )
@@ -129,6 +232,7 @@ def _check_align(src: SourceSpec, section: str, source_name: str) -> None:
             raise ContractError(
                 f"fill 'zeros' on camera {src.key} needs a known frame size",
                 file=source_name,
+                line=src.line,
                 field=f"{field}.fill",
                 fix="set 'image: {resize: [h, w]}', or use fill 'hold' / 'drop_frame' / 'fail'.",
             )
@@ -136,18 +240,24 @@ def _check_align(src: SourceSpec, section: str, source_name: str) -> None:
             raise ContractError(
                 f"fill 'zeros' on {src.key} needs a known width",
                 file=source_name,
+                line=src.line,
                 field=f"{field}.fill",
                 fix="list the dimensions in selector.names.",
             )
 
 
-def compile_contract(contract: Contract, source_name: str = "contract") -> ContractPlan:
-    """Group entries by key (declaration order) and check what can be checked without a bag."""
-    entries: list[tuple[ObservationEntry | ActionEntry | ScalarEntry, str, StampSource | None]] = []
-    entries += [(e, "observations", None) for e in contract.observations]
-    entries += [(e, "actions", contract.timestamp_source) for e in contract.actions]
+def compile_contract(
+    contract: Contract, source_name: str = "contract", line_of: LineOf | None = None
+) -> ContractPlan:
+    """Group entries by key (declaration order) and check what can be checked without a bag.
+
+    ``line_of`` places errors on the entry's line in the file."""
+    entries: list[tuple[ObservationEntry | ActionEntry | ScalarEntry, str, StampSource | None, int]] = []
+    entries += [(e, "observations", None, i) for i, e in enumerate(contract.observations)]
+    entries += [(e, "actions", contract.timestamp_source, i) for i, e in enumerate(contract.actions)]
+    offset_ns = action_offset_ns(contract, source_name)
     for section in ("rewards", "signals", "complementary_data"):
-        entries += [(e, section, None) for e in getattr(contract, section)]
+        entries += [(e, section, None, i) for i, e in enumerate(getattr(contract, section))]
     if not entries:
         raise ContractError(
             "declares no features",
@@ -156,9 +266,16 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
         )
 
     grouped: dict[str, list[tuple[SourceSpec, str | None]]] = {}
-    for entry, section, stamp in entries:
-        src = _source(entry, section, stamp)
+    for entry, section, stamp, index in entries:
+        src = _source(
+            entry,
+            section,
+            stamp,
+            offset_ns if section == "actions" else 0,
+            line_of((section, index)) if line_of else None,
+        )
         _check_align(src, section, source_name)
+        _check_frames(src, section, source_name)
         grouped.setdefault(src.key, []).append((src, entry.dtype))
 
     features = []
@@ -171,6 +288,7 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
                 raise ContractError(
                     f"image key {key!r} is declared on several topics ({topics})",
                     file=source_name,
+                    line=sources[1].line,
                     field=key,
                     fix="give each camera its own key, e.g. observation.images.front and observation.images.wrist.",
                 )
@@ -180,6 +298,7 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
             raise ContractError(
                 f"key {key!r} mixes image topics and numeric topics",
                 file=source_name,
+                line=sources[-1].line,
                 field=key,
                 fix="use separate keys for images and for numeric data.",
             )
@@ -188,6 +307,7 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
             raise ContractError(
                 f"entries of key {key!r} ask for different dtypes {sorted(dtypes)}",
                 file=source_name,
+                line=sources[-1].line,
                 field=f"{key}.dtype",
                 fix="use one dtype for every entry of a key.",
             )
@@ -196,10 +316,18 @@ def compile_contract(contract: Contract, source_name: str = "contract") -> Contr
             raise ContractError(
                 f"dtype {dtype!r} of key {key!r} is not a numeric dtype",
                 file=source_name,
+                line=sources[0].line,
                 field=f"{key}.dtype",
                 fix=f"use one of {sorted(_NUMERIC_DTYPES)}.",
             )
         features.append(FeatureSpec(key, FeatureKind.VECTOR, dtype, sources))
+    if contract.clock is not None and contract.clock not in grouped:
+        raise ContractError(
+            f"clock {contract.clock!r} is not a feature key of this contract",
+            file=source_name,
+            field="clock",
+            fix=f"use one of {sorted(grouped)}, or remove 'clock' for the fixed grid.",
+        )
     return ContractPlan(
         contract=contract, source_name=source_name, features=tuple(features), task_topics=contract.tasks
     )

@@ -15,6 +15,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+from fsspec import AbstractFileSystem
+from fsspec.core import url_to_fs
 
 from bagport.dataset.layout import HISTOGRAMS_PATH, INFO_PATH, STATS_PATH, TASKS_PATH, next_chunk_file
 from bagport.errors import DatasetWriteError
@@ -37,6 +39,8 @@ class DatasetBase:
     next_provenance: tuple[int, int]
     run_number: int
     """Runs recorded so far (``meta/provenance/run.json`` is run 0, appends add ``run-001.json``...)."""
+    data_files: tuple[str, ...] = ()
+    """The existing data files (read, never rewritten: dataset-wide quantiles cover their frames)."""
 
     @property
     def episodes(self) -> int:
@@ -47,10 +51,10 @@ class DatasetBase:
         return int(self.info["total_frames"])
 
 
-def _next(folder: Path, pattern: str, chunks_size: int) -> tuple[int, int]:
+def _next(fs: AbstractFileSystem, folder: str, pattern: str, chunks_size: int) -> tuple[int, int]:
     found = []
-    for path in folder.glob(pattern):
-        match = _CHUNK_FILE.search(path.as_posix())
+    for path in fs.glob(f"{folder}/{pattern}"):
+        match = _CHUNK_FILE.search(str(path))
         if match:
             found.append((int(match.group(1)), int(match.group(2))))
     if not found:
@@ -58,36 +62,45 @@ def _next(folder: Path, pattern: str, chunks_size: int) -> tuple[int, int]:
     return next_chunk_file(*max(found), chunks_size)
 
 
-def read_base(root: Path) -> DatasetBase:
-    """Read what an append needs from the dataset at ``root`` (local)."""
-    info_path = root / INFO_PATH
-    if not info_path.is_file():
+def _read_json(fs: AbstractFileSystem, path: str) -> Any:
+    with fs.open(path, "r", encoding="utf-8") as handle:
+        return json.load(handle)
+
+
+def read_base(root: str | Path) -> DatasetBase:
+    """Read what an append needs from the dataset at ``root`` (a local path or fsspec URI)."""
+    fs, path = url_to_fs(str(root))
+    path = path.rstrip("/")
+    if not fs.isfile(f"{path}/{INFO_PATH}"):
         raise DatasetWriteError(
             f"{root} is not a LeRobot dataset (no {INFO_PATH}); nothing was written. Fix: --append needs an "
             "existing bagport dataset at --output, or leave --append out to create one."
         )
-    info = json.loads(info_path.read_text())
-    histograms_path = root / HISTOGRAMS_PATH
-    histograms = {
-        key: np.asarray(value, dtype=np.int64)
-        for key, value in (
-            json.loads(histograms_path.read_text()) if histograms_path.is_file() else {}
-        ).items()
-    }
-    raw_stats = json.loads((root / STATS_PATH).read_text())
-    tasks_frame = pd.read_parquet(root / TASKS_PATH)
+    info = _read_json(fs, f"{path}/{INFO_PATH}")
+    raw_histograms = (
+        _read_json(fs, f"{path}/{HISTOGRAMS_PATH}") if fs.isfile(f"{path}/{HISTOGRAMS_PATH}") else {}
+    )
+    histograms = {key: np.asarray(value, dtype=np.int64) for key, value in raw_histograms.items()}
+    raw_stats = _read_json(fs, f"{path}/{STATS_PATH}")
+    with fs.open(f"{path}/{TASKS_PATH}", "rb") as handle:
+        tasks_frame = pd.read_parquet(handle)
     tasks = [str(t) for t in tasks_frame.sort_values("task_index").index]
     chunks = int(info["chunks_size"])
     video_keys = [k for k, f in info["features"].items() if f.get("dtype") == "video"]
-    runs = sorted((root / "meta" / "provenance").glob("run*.json"))
+    runs = fs.glob(f"{path}/meta/provenance/run*.json")
     return DatasetBase(
         info=info,
         tasks=tasks,
         stats={key: stats_from_json(value) for key, value in raw_stats.items()},
         histograms=histograms,
-        next_data=_next(root / "data", "chunk-*/file-*.parquet", chunks),
-        next_video={key: _next(root / "videos" / key, "chunk-*/file-*.mp4", chunks) for key in video_keys},
-        next_episodes=_next(root / "meta" / "episodes", "chunk-*/file-*.parquet", chunks),
-        next_provenance=_next(root / "meta" / "provenance", "chunk-*/file-*.parquet", chunks),
+        next_data=_next(fs, f"{path}/data", "chunk-*/file-*.parquet", chunks),
+        next_video={
+            key: _next(fs, f"{path}/videos/{key}", "chunk-*/file-*.mp4", chunks) for key in video_keys
+        },
+        next_episodes=_next(fs, f"{path}/meta/episodes", "chunk-*/file-*.parquet", chunks),
+        next_provenance=_next(fs, f"{path}/meta/provenance", "chunk-*/file-*.parquet", chunks),
         run_number=len(runs),
+        data_files=tuple(
+            fs.unstrip_protocol(p) for p in sorted(fs.glob(f"{path}/data/chunk-*/file-*.parquet"))
+        ),
     )

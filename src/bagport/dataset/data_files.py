@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import pyarrow as pa
+import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
@@ -29,10 +30,17 @@ class DataPlacement:
     to_index: int
 
 
+def _is_scalar(feature: StagedFeature) -> bool:
+    """LeRobot stores shape ``(1,)`` features as plain values, not one-element lists."""
+    return tuple(feature.shape) == (1,)
+
+
 def hf_features_metadata(vectors: Sequence[StagedFeature]) -> bytes:
     """The ``huggingface`` schema metadata LeRobot's own writer puts in data parquet files."""
     features: dict[str, object] = {
-        f.key: {"feature": {"dtype": f.dtype, "_type": "Value"}, "length": f.shape[0], "_type": "List"}
+        f.key: {"dtype": f.dtype, "_type": "Value"}
+        if _is_scalar(f)
+        else {"feature": {"dtype": f.dtype, "_type": "Value"}, "length": f.shape[0], "_type": "List"}
         for f in vectors
     }
     features["timestamp"] = {"dtype": "float32", "_type": "Value"}
@@ -53,7 +61,10 @@ def _episode_table(
         staged = pq.read_table(handle)
     frames = staged.num_rows
     tasks = [str(t) for t in staged.column("task").to_pylist()]
-    columns: dict[str, Any] = {f.key: staged.column(f.key) for f in vectors}
+    columns: dict[str, Any] = {
+        f.key: pc.list_flatten(staged.column(f.key)) if _is_scalar(f) else staged.column(f.key)
+        for f in vectors
+    }
     columns["timestamp"] = staged.column("timestamp")
     columns["frame_index"] = staged.column("frame_index")
     columns["episode_index"] = pa.array(np.full(frames, episode_index, dtype=np.int64))

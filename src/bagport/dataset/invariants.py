@@ -182,8 +182,9 @@ def _check_stats(root: Path, info: dict[str, Any]) -> None:
                 raise _fail(path, f"{key}/{stat} is not finite")
             if stat == "count":
                 continue
-            if feature["dtype"] == "video" and value.shape != (3, 1, 1):
-                raise _fail(path, f"{key}/{stat} has shape {value.shape}, expected (3, 1, 1)")
+            channels = feature["shape"][2] if feature["dtype"] == "video" else 0
+            if feature["dtype"] == "video" and value.shape != (channels, 1, 1):
+                raise _fail(path, f"{key}/{stat} has shape {value.shape}, expected ({channels}, 1, 1)")
             if feature["dtype"] != "video" and value.shape != tuple(feature["shape"]):
                 raise _fail(
                     path, f"{key}/{stat} has shape {value.shape}, feature shape is {feature['shape']}"

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 __all__ = [
+    "APPEND_BACKUP_DIR",
+    "APPEND_JOURNAL_PATH",
     "APPEND_RUN_RECORD_PATH",
     "CODEBASE_VERSION",
     "DATA_PATH",
@@ -30,6 +32,9 @@ VIDEO_PATH = "videos/{video_key}/" + CHUNK_FILE + ".mp4"
 PROVENANCE_PATH = "meta/provenance/" + CHUNK_FILE + ".parquet"
 RUN_RECORD_PATH = "meta/provenance/run.json"
 APPEND_RUN_RECORD_PATH = "meta/provenance/run-{run:03d}.json"
+APPEND_JOURNAL_PATH = ".append-journal.json"
+"""While an append uploads to an object store: what it adds and rewrites (see bagport.dataset.remote)."""
+APPEND_BACKUP_DIR = ".append-backup-{run_id}"
 HISTOGRAMS_PATH = "meta/provenance/image_histograms.json"
 """Dataset-wide pixel histograms per camera, so an append merges image stats exactly."""
 

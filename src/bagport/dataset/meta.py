@@ -15,6 +15,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
+from bagport.columns import column_matrix
 from bagport.dataset.base import DatasetBase
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import (
@@ -32,13 +33,22 @@ from bagport.dataset.videos import VideoPlacement
 from bagport.staging import STATS_FILE, EpisodeSummary, StagedFeature
 from bagport.stats import (
     FeatureStats,
+    QuantileHistogram,
     merge_feature_stats,
     merge_histograms,
     stats_from_json,
     vector_stats,
 )
+from bagport.video.depth import histogram_levels
 
-__all__ = ["DatasetLimits", "EpisodeStats", "build_info", "load_episode_stats", "write_meta"]
+__all__ = [
+    "DatasetLimits",
+    "EpisodeStats",
+    "build_info",
+    "dataset_quantiles",
+    "load_episode_stats",
+    "write_meta",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -46,6 +56,15 @@ class DatasetLimits:
     chunks_size: int = 1000
     data_files_size_in_mb: float = 100
     video_files_size_in_mb: float = 200
+
+    @classmethod
+    def from_info(cls, info: dict[str, Any]) -> DatasetLimits:
+        """The limits an existing dataset was written with (an append keeps them)."""
+        return cls(
+            chunks_size=int(info["chunks_size"]),
+            data_files_size_in_mb=float(info["data_files_size_in_mb"]),
+            video_files_size_in_mb=float(info["video_files_size_in_mb"]),
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,6 +152,26 @@ def _has_label_columns(root: Path) -> bool:
     return not existing or all(name in pq.read_schema(existing[0]).names for name in _LABEL_COLUMNS)
 
 
+def dataset_quantiles(
+    data_files: Sequence[str | Path], merged: dict[str, FeatureStats]
+) -> dict[str, dict[str, npt.NDArray[np.float64]]]:
+    """Quantiles of each vector feature over every frame of ``data_files`` (one streaming pass), between
+    the merged min and max; shaped like the merged stats."""
+    if not merged or not data_files:
+        return {}
+    counters = {key: QuantileHistogram(stats["min"], stats["max"]) for key, stats in merged.items()}
+    for uri in data_files:
+        fs, path = url_to_fs(str(uri))
+        with fs.open(path, "rb") as handle:
+            for batch in pq.ParquetFile(handle).iter_batches(batch_size=65_536, columns=list(counters)):
+                for key, counter in counters.items():
+                    counter.update(column_matrix(batch.column(key)))
+    return {
+        key: {q: value.reshape(np.shape(merged[key]["min"])) for q, value in counter.quantiles().items()}
+        for key, counter in counters.items()
+    }
+
+
 def write_meta(
     root: Path,
     summaries: Sequence[EpisodeSummary],
@@ -143,9 +182,11 @@ def write_meta(
     episode_stats: Sequence[EpisodeStats],
     info: dict[str, Any],
     base: DatasetBase | None = None,
+    data_files: Sequence[str | Path] = (),
 ) -> None:
     """Write ``meta/``; with ``base`` (an append) the new episodes continue the existing ones in a new
-    episodes file, and stats merge with the existing dataset's."""
+    episodes file, and stats merge with the existing dataset's. ``data_files`` are every data file
+    of the dataset (the base's and the new ones): vector quantiles are computed over all their frames."""
     first_episode = base.episodes if base is not None else 0
     episodes_file = base.next_episodes if base is not None else (0, 0)
     (root / "meta").mkdir(parents=True, exist_ok=True)
@@ -191,8 +232,10 @@ def write_meta(
         table = table.drop_columns(list(_LABEL_COLUMNS))  # LeRobot loads episode files of one schema only
     pq.write_table(table, episodes_path)
 
-    merged: dict[str, Any] = {}
+    merged_stats: dict[str, FeatureStats] = {}
+    quantiles: list[str] = []
     histograms: dict[str, list[int]] = {}
+    levels = {f.key: histogram_levels(f.video_info) for f in features if f.video_info is not None}
     for key in stat_keys:
         parts = [ep.stats[key] for ep in episode_stats]
         if base is not None:
@@ -201,11 +244,19 @@ def write_meta(
             hists = [ep.histograms[key] for ep in episode_stats]
             if base is not None:
                 hists.append(base.histograms[key])
-            value = merge_histograms(hists, [int(p["count"][0]) for p in parts])
+            value = merge_histograms(hists, [int(p["count"][0]) for p in parts], levels.get(key))
             histograms[key] = np.sum(np.stack(hists), axis=0).tolist()
         else:
             value = merge_feature_stats(parts)
-        merged[key] = {stat: np.asarray(v).tolist() for stat, v in value.items()}
+            quantiles.append(key)
+        merged_stats[key] = value
+    # vector quantiles over every frame (base and new files), within one bin: see bagport.stats.quantiles
+    for key, values in dataset_quantiles(data_files, {k: merged_stats[k] for k in quantiles}).items():
+        merged_stats[key].update(values)
+    merged = {
+        key: {stat: np.asarray(v).tolist() for stat, v in value.items()}
+        for key, value in merged_stats.items()
+    }
     (root / STATS_PATH).write_text(json.dumps(merged, indent=4))
     (root / HISTOGRAMS_PATH).parent.mkdir(parents=True, exist_ok=True)
     (root / HISTOGRAMS_PATH).write_text(json.dumps(histograms))

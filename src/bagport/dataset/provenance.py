@@ -68,6 +68,7 @@ def write_provenance(
             "bag_size_bytes": s.bag_size_bytes,
             "bag_fingerprint": s.bag_fingerprint,
             "source_stamp": s.source_stamp,
+            "bag_read": s.bag_read,
             "manifest_entry": s.manifest_entry,
             "staged_episode_id": s.episode_id,
             "frames": s.frames,

@@ -20,6 +20,7 @@ from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
 from bagport.dataset.qa import write_qa
+from bagport.dataset.remote import append_remote, publish_remote, recover_remote_publish
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
 from bagport.qa import QAEntry
@@ -141,7 +142,11 @@ def _build(
     )
     if base is not None:
         _check_same_features(base, info)
-    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base)
+    data_files: list[str | Path] = [
+        *(base.data_files if base is not None else ()),
+        *sorted(root.glob("data/chunk-*/file-*.parquet")),
+    ]
+    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base, data_files)
     write_provenance(root, summaries, data, run_record, base)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
     total_frames = first_index + new_frames
@@ -203,17 +208,25 @@ def write_dataset(
     Everything is built in a temporary folder beside ``output`` and renamed into
     place at the end, so a reader never sees a half-written dataset and a failure
     leaves whatever was at ``output`` untouched. With ``append``, the episodes are
-    added to the dataset at ``output`` (created if missing) as new files.
+    added to the dataset at ``output`` (created if missing) as new files. On an object
+    store (no renames) the dataset is built locally and published under a journal that
+    the next run rolls back after a crash (:mod:`bagport.dataset.remote`).
     """
     limits = limits or DatasetLimits()
     fs, out_path = url_to_fs(output)
     local = is_local(fs)
+    if not local and fs.exists(out_path):
+        recover_remote_publish(output)  # a crashed publish: back to the previous version (or nothing)
     if append and fs.exists(out_path):
         if not local:
-            raise DatasetWriteError(
-                f"--append to {output} is not supported: appending publishes atomically by renames, which only "
-                "a local output allows. Fix: append to a local dataset and sync it, or convert into a new --output."
-            )
+
+            def build(root: Path, base: DatasetBase, limits: DatasetLimits) -> DatasetReport:
+                return _build(
+                    root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {}, base
+                )
+
+            report = append_remote(output, build)
+            return replace(report, root=output, size_bytes=int(fs.du(out_path)))
         return _append(Path(out_path), summaries, robot_type, run_record or {}, qa, qa_config or {})
     if fs.exists(out_path) and not overwrite:
         raise DatasetWriteError(
@@ -232,9 +245,9 @@ def write_dataset(
         if local:
             _swap_into_place(build_root, final)
         else:
-            if fs.exists(out_path):
-                fs.rm(out_path, recursive=True)
-            fs.put(str(build_root), out_path, recursive=True)
+            files = sorted(p.relative_to(build_root).as_posix() for p in build_root.rglob("*") if p.is_file())
+            stale = sorted({p[len(out_path.rstrip("/")) + 1 :] for p in fs.find(out_path)} - set(files))
+            publish_remote(build_root, output, files, stale)
     except BaseException:
         shutil.rmtree(build_root, ignore_errors=True)
         raise
@@ -270,12 +283,7 @@ def _append(
     """
     recover_interrupted_append(final)
     base = read_base(final)
-    info = base.info
-    limits = DatasetLimits(
-        chunks_size=int(info["chunks_size"]),
-        data_files_size_in_mb=float(info["data_files_size_in_mb"]),
-        video_files_size_in_mb=float(info["video_files_size_in_mb"]),
-    )
+    limits = DatasetLimits.from_info(base.info)
     build_root = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex[:8]}"
     build_root.mkdir(parents=True)
     moved: list[Path] = []

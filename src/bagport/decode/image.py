@@ -1,4 +1,13 @@
-"""Decode sensor_msgs Image / CompressedImage into RGB uint8 arrays (HxWx3)."""
+"""Decode sensor_msgs Image / CompressedImage into RGB uint8 (H, W, 3) or depth (H, W) metres.
+
+Colour and grey encodings come out RGB uint8: ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``, ``8UC3``
+(OpenCV's BGR order), ``mono8``, ``8UC1``, ``mono16`` (scaled to 8 bits: ``round(v / 257)``) and
+``bayer_rggb8|bggr8|gbrg8|grbg8`` (bilinear demosaic; the ``...16`` variants are scaled to 8 bits
+first). Depth encodings come out float32 metres with NaN for invalid
+(:mod:`bagport.decode.depth`): ``16UC1`` (millimetres), ``32FC1`` (metres), and
+``compressedDepth`` CompressedImages. CompressedImage ``jpeg`` and ``png`` come out RGB (a
+16-bit PNG whose format names ``16UC1`` is depth in millimetres).
+"""
 
 from __future__ import annotations
 
@@ -10,77 +19,129 @@ import numpy.typing as npt
 import simplejpeg
 from PIL import Image as PILImage
 
+from bagport.decode.bayer import BAYER_PATTERNS, demosaic
+from bagport.decode.depth import DEPTH_ENCODINGS, decode_compressed_depth, depth_from_pixels
 from bagport.errors import DecodeError
 from bagport.msgtypes import RosType
 
-__all__ = ["RawEncoding", "decode_image", "resize_rgb"]
+__all__ = ["RawEncoding", "decode_image", "image_channels", "is_depth"]
 
 Rgb = npt.NDArray[np.uint8]
 
 
 class RawEncoding:
-    """Raw encodings bagport reads (sensor_msgs/image_encodings.h names)."""
+    """Raw encodings bagport reads (sensor_msgs/image_encodings.h names, lower case)."""
 
     RGB8 = "rgb8"
     BGR8 = "bgr8"
     RGBA8 = "rgba8"
     BGRA8 = "bgra8"
     MONO8 = "mono8"
+    MONO16 = "mono16"
+    TYPE_8UC1 = "8uc1"
+    TYPE_8UC3 = "8uc3"
+    TYPE_16UC1 = "16uc1"
+    TYPE_32FC1 = "32fc1"
 
 
-_CHANNELS = {
-    RawEncoding.RGB8: 3,
-    RawEncoding.BGR8: 3,
-    RawEncoding.RGBA8: 4,
-    RawEncoding.BGRA8: 4,
-    RawEncoding.MONO8: 1,
+_BAYER8 = {f"bayer_{p}8": p for p in BAYER_PATTERNS}
+_BAYER16 = {f"bayer_{p}16": p for p in BAYER_PATTERNS}
+_LAYOUT: dict[str, tuple[str, int]] = {
+    RawEncoding.RGB8: ("u1", 3),
+    RawEncoding.BGR8: ("u1", 3),
+    RawEncoding.TYPE_8UC3: ("u1", 3),
+    RawEncoding.RGBA8: ("u1", 4),
+    RawEncoding.BGRA8: ("u1", 4),
+    RawEncoding.MONO8: ("u1", 1),
+    RawEncoding.TYPE_8UC1: ("u1", 1),
+    RawEncoding.MONO16: ("u2", 1),
+    RawEncoding.TYPE_16UC1: ("u2", 1),
+    RawEncoding.TYPE_32FC1: ("f4", 1),
+    **dict.fromkeys(_BAYER8, ("u1", 1)),
+    **dict.fromkeys(_BAYER16, ("u2", 1)),
 }
 _JPEG_MAGIC = b"\xff\xd8"
 _PNG_MAGIC = b"\x89PNG"
 
 
-def _decode_raw(msg: Any) -> Rgb:
-    encoding = str(msg.encoding).lower()
-    channels = _CHANNELS.get(encoding)
-    if channels is None:
-        raise DecodeError(
-            f"raw image encoding {msg.encoding!r} is not supported (supported: {sorted(_CHANNELS)})",
-            fix="convert the topic, or map it with a custom decoder.",
-        )
+def is_depth(image: npt.NDArray[Any]) -> bool:
+    """Whether a decoded frame is a depth map (float32 metres, one channel) rather than RGB."""
+    return image.ndim == 2
+
+
+def image_channels(image: npt.NDArray[Any]) -> int:
+    """Channels of the feature a decoded frame becomes: 1 for depth, 3 for RGB."""
+    return 1 if is_depth(image) else 3
+
+
+def _to_8bit(grey16: npt.NDArray[np.uint16]) -> npt.NDArray[np.uint8]:
+    """Full 16-bit range onto 0..255 (``round(v / 257)``: 65535 -> 255)."""
+    return ((grey16.astype(np.uint32) + 128) // 257).astype(np.uint8)
+
+
+def _pixels(msg: Any, encoding: str) -> npt.NDArray[Any]:
+    """(H, W, C) view of the message's pixels in their own type (byte order applied)."""
+    kind, channels = _LAYOUT[encoding]
+    dtype = np.dtype(kind).newbyteorder(">" if int(getattr(msg, "is_bigendian", 0)) else "<")
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
     data = np.frombuffer(msg.data, dtype=np.uint8) if not isinstance(msg.data, np.ndarray) else msg.data
-    if step < width * channels or data.size < height * step:
+    row_bytes = width * channels * dtype.itemsize
+    if step < row_bytes or data.size < height * step:
         raise DecodeError(
             f"image data has {data.size} bytes, expected {height}x{step} for {width}x{height} {encoding}",
             fix="the message is truncated or its step/encoding fields are wrong.",
         )
-    rows = data[: height * step].reshape(height, step)[:, : width * channels]
-    pixels = rows.reshape(height, width, channels)
-    if encoding == RawEncoding.RGB8:
+    rows = data[: height * step].reshape(height, step)[:, :row_bytes]
+    values = rows.view(dtype) if dtype.itemsize > 1 else rows
+    return values.reshape(height, width, channels)
+
+
+def _decode_raw(msg: Any) -> npt.NDArray[Any]:
+    encoding = str(msg.encoding).lower()
+    if encoding not in _LAYOUT:
+        raise DecodeError(
+            f"raw image encoding {msg.encoding!r} is not supported (supported: {sorted(_LAYOUT)})",
+            fix="convert the topic, or map it with a custom decoder.",
+        )
+    pixels = _pixels(msg, encoding)
+    if encoding in DEPTH_ENCODINGS:
+        return depth_from_pixels(pixels[:, :, 0], encoding)
+    if encoding in (RawEncoding.RGB8,):
         return pixels
-    if encoding == RawEncoding.BGR8:
+    if encoding in (RawEncoding.BGR8, RawEncoding.TYPE_8UC3):
         return pixels[:, :, ::-1]
     if encoding == RawEncoding.RGBA8:
         return pixels[:, :, :3]
     if encoding == RawEncoding.BGRA8:
         return pixels[:, :, 2::-1]
-    return np.repeat(pixels, 3, axis=2)
+    if encoding in _BAYER8:
+        return demosaic(np.ascontiguousarray(pixels[:, :, 0]), _BAYER8[encoding])
+    if encoding in _BAYER16:
+        return demosaic(_to_8bit(pixels[:, :, 0]), _BAYER16[encoding])
+    grey = _to_8bit(pixels) if pixels.dtype.itemsize == 2 else pixels
+    return np.repeat(grey, 3, axis=2)
 
 
-def _decode_compressed(msg: Any) -> Rgb:
+def _decode_png(payload: bytes, fmt: str) -> npt.NDArray[Any]:
+    with PILImage.open(io.BytesIO(payload)) as img:
+        if img.mode.startswith("I"):  # 16-bit grey
+            grey16 = np.asarray(img).astype(np.uint16)
+            if fmt.split(";", 1)[0].strip() == RawEncoding.TYPE_16UC1:
+                return depth_from_pixels(grey16, RawEncoding.TYPE_16UC1)
+            return np.repeat(_to_8bit(grey16)[:, :, None], 3, axis=2)
+        return np.asarray(img.convert("RGB"), dtype=np.uint8)
+
+
+def _decode_compressed(msg: Any) -> npt.NDArray[Any]:
     payload = msg.data.tobytes() if isinstance(msg.data, np.ndarray) else bytes(msg.data)
     fmt = str(msg.format).lower()
     if "compresseddepth" in fmt:
-        raise DecodeError(
-            f"compressed depth images ({msg.format!r}) are not supported yet",
-            fix="remove this topic from the contract for now.",
-        )
+        return decode_compressed_depth(payload, str(msg.format))
     is_jpeg = payload[:2] == _JPEG_MAGIC or (("jpeg" in fmt or "jpg" in fmt) and payload[:4] != _PNG_MAGIC)
     try:
         if is_jpeg:
             return np.asarray(simplejpeg.decode_jpeg(payload, colorspace="RGB"), dtype=np.uint8)
-        with PILImage.open(io.BytesIO(payload)) as img:
-            return np.asarray(img.convert("RGB"), dtype=np.uint8)
+        return _decode_png(payload, fmt)
     except (ValueError, OSError) as err:
         raise DecodeError(
             f"compressed image (format {msg.format!r}, {len(payload)} bytes) cannot be decoded: {err}",
@@ -88,18 +149,13 @@ def _decode_compressed(msg: Any) -> Rgb:
         ) from err
 
 
-def decode_image(msg: Any, msgtype: str) -> Rgb:
-    """RGB uint8 (H, W, 3); BGR encodings come out as RGB.  May be a view of ``msg``."""
+def decode_image(msg: Any, msgtype: str) -> npt.NDArray[Any]:
+    """RGB uint8 (H, W, 3), or float32 (H, W) depth in metres with NaN for invalid pixels.
+
+    BGR encodings come out as RGB; the result may be a view of ``msg``.
+    """
     if msgtype == RosType.IMAGE:
         return _decode_raw(msg)
     if msgtype == RosType.COMPRESSED_IMAGE:
         return _decode_compressed(msg)
     raise DecodeError(f"{msgtype} is not an image type")
-
-
-def resize_rgb(rgb: Rgb, height: int, width: int) -> Rgb:
-    """Bilinear resize (area-averaging when shrinking, via PIL's reducing filter)."""
-    if rgb.shape[0] == height and rgb.shape[1] == width:
-        return rgb
-    img = PILImage.fromarray(np.ascontiguousarray(rgb))
-    return np.asarray(img.resize((width, height), PILImage.Resampling.BILINEAR, reducing_gap=2.0))

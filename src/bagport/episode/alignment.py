@@ -2,7 +2,7 @@
 
 Missing values are handled by each source's ``align.fill`` policy (``fail`` by default), never
 silently; the per-source report (alignment error, held / interpolated / filled / dropped frames)
-goes into the episode summary and the provenance log.
+goes into the episode summary, the provenance log and the QA record (:func:`bagport.qa.alignment_checks`).
 """
 
 from __future__ import annotations
@@ -12,7 +12,15 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from bagport.align import NS_PER_S, Selection, grid_ticks_ns, hold_fill, select_for_ticks
+from bagport.align import (
+    NS_PER_S,
+    Selection,
+    grid_drift_ns,
+    grid_ticks_ns,
+    hold_fill,
+    reference_ticks_ns,
+    select_for_ticks,
+)
 from bagport.contract import ContractPlan, SourceSpec
 from bagport.contract.model import StampSource
 from bagport.episode.assemble import AlignedSource
@@ -35,12 +43,24 @@ def _stamp_source(src: SourceSpec, topic: TopicTimeline, uri: str) -> StampSourc
             topic=src.topic,
             fix="set 'align: {stamp: receive}' for this entry.",
         )
+    if stamp == "publish" and topic.publish_ns is None:
+        raise AlignmentError(
+            f"align.stamp is 'publish' for {src.key!r} but the bag records no publish time "
+            "(only MCAP bags do; ROS 1 and SQLite bags store the receive time alone)",
+            uri=uri,
+            topic=src.topic,
+            fix="set 'align: {stamp: receive}' or 'stamp: header' for this entry.",
+        )
     return stamp
 
 
-def _grid(chosen: list[tuple[SourceSpec, TopicTimeline, StampSource]], fps: int, uri: str) -> Int64Array:
-    firsts = [(int(t.stamps(s).min()), t.topic) for _, t, s in chosen]
-    lasts = [(int(t.stamps(s).max()), t.topic) for _, t, s in chosen]
+_Chosen = tuple[SourceSpec, TopicTimeline, StampSource]
+
+
+def _window(chosen: list[_Chosen], uri: str) -> tuple[int, int]:
+    """Ticks where every source has data at ``tick + offset``: the latest first stamp to the earliest last."""
+    firsts = [(int(t.stamps(s).min()) - src.offset_ns, t.topic) for src, t, s in chosen]
+    lasts = [(int(t.stamps(s).max()) - src.offset_ns, t.topic) for src, t, s in chosen]
     start_ns, start_topic = max(firsts)
     end_ns, end_topic = min(lasts)
     if end_ns < start_ns:
@@ -50,9 +70,44 @@ def _grid(chosen: list[tuple[SourceSpec, TopicTimeline, StampSource]], fps: int,
         raise AlignmentError(
             f"the streams never overlap in time ({start_topic} starts after {end_topic} ends): {ranges}",
             uri=uri,
-            fix="check the topics and the stamp source (header vs receive) in the contract.",
+            fix="check the topics, the stamp source (header vs receive) and action_offset_ms in the contract.",
         )
-    return grid_ticks_ns(start_ns, end_ns, fps)
+    return start_ns, end_ns
+
+
+def _clock_ticks(
+    plan: ContractPlan, chosen: list[_Chosen], start_ns: int, end_ns: int, uri: str
+) -> tuple[Int64Array, dict[str, Any]]:
+    """One tick per message of the ``clock`` stream (its first source), and how far they drift off the grid."""
+    src, topic, stamp = next(c for c in chosen if c[0].key == plan.clock)
+    ticks = reference_ticks_ns(topic.stamps(stamp), start_ns, end_ns)
+    if ticks.size < 2:
+        raise AlignmentError(
+            f"the clock stream {src.key!r} has {ticks.size} message(s) while every stream has data",
+            uri=uri,
+            topic=src.topic,
+            fix="choose another 'clock' key, or remove it for the fixed grid.",
+        )
+    rate_hz = NS_PER_S / float(np.median(np.diff(ticks)))
+    if abs(rate_hz - plan.fps) > 0.05 * plan.fps:
+        raise AlignmentError(
+            f"the clock stream {src.key!r} runs at {rate_hz:.2f} Hz (median period) but fps is {plan.fps}: "
+            "frames stamped frame_index / fps would run at the wrong speed",
+            uri=uri,
+            topic=src.topic,
+            fix=f"set 'fps: {round(rate_hz)}', or remove 'clock' for the fixed grid.",
+        )
+    drift_ms = np.abs(grid_drift_ns(ticks, plan.fps)) / 1e6
+    clock = {
+        "key": src.key,
+        "rate_hz": round(rate_hz, 3),
+        "drift_ms": {
+            "median": float(np.median(drift_ms)),
+            "p95": float(np.percentile(drift_ms, 95)),
+            "max": float(drift_ms.max()),
+        },
+    }
+    return ticks, clock
 
 
 def _missing_error(
@@ -71,14 +126,15 @@ def _missing_error(
 
 def _report(
     src: SourceSpec, stamp: StampSource, stamps: Int64Array, sel: Selection, filled: BoolArray,
-    ticks: Int64Array, fps: int, dropped: int,
+    targets: Int64Array, fps: int, dropped: int,
 ) -> dict[str, Any]:  # fmt: skip
+    """Alignment error ``|tick + offset - source time|`` and frame counts of one source."""
     valid = sel.lo >= 0
     used = stamps[np.maximum(sel.lo, 0)]
     if sel.hi is not None and sel.weight is not None:
         other = stamps[np.maximum(sel.hi, 0)]
         used = np.where(sel.weight >= 0.5, other, used)
-    error_ms = np.abs(ticks - used)[valid & ~filled] / 1e6
+    error_ms = np.abs(targets - used)[valid & ~filled] / 1e6
     period_ns = NS_PER_S // fps
     interpolated = 0 if sel.weight is None else int(((sel.weight > 0) & valid & ~filled).sum())
     return {
@@ -87,12 +143,13 @@ def _report(
         "stamp": stamp,
         "strategy": src.strategy,
         "fill": src.fill,
+        "offset_ms": src.offset_ns / 1e6,
         "error_ms": {
             "median": float(np.median(error_ms)) if error_ms.size else None,
             "p95": float(np.percentile(error_ms, 95)) if error_ms.size else None,
             "max": float(error_ms.max()) if error_ms.size else None,
         },
-        "held_frames": int(((ticks - stamps[np.maximum(sel.lo, 0)]) >= period_ns)[valid].sum()),
+        "held_frames": int(((targets - stamps[np.maximum(sel.lo, 0)]) >= period_ns)[valid & ~filled].sum()),
         "interpolated_frames": interpolated,
         "filled_frames": int(filled.sum()),
         "dropped_frames": dropped,
@@ -102,20 +159,30 @@ def _report(
 def align_sources(
     plan: ContractPlan, timeline: Timeline, uri: str
 ) -> tuple[list[AlignedSource], Int64Array, list[dict[str, Any]]]:
-    """Sources with their per-tick selections, the tick times, and the alignment report."""
-    chosen = []
+    """Sources with their per-tick selections, the tick times, and the alignment report.
+
+    Each source is sampled at ``tick + offset_ns`` (``action_offset_ms`` on actions).  The ticks
+    are the fixed grid from the first moment every stream has data, or, with ``clock: <key>``,
+    the messages of that stream (whose report then carries the clock's rate and drift).
+    """
+    chosen: list[_Chosen] = []
     kinds = []
     for feature in plan.features:
         for src in feature.sources:
-            topic = timeline.topics[src.topic]
+            topic = timeline.topics[src.stream]
             chosen.append((src, topic, _stamp_source(src, topic, uri)))
             kinds.append(feature.kind)
-    ticks = _grid(chosen, plan.fps, uri)
+    start_ns, end_ns = _window(chosen, uri)
+    clock: dict[str, Any] | None = None
+    if plan.clock is None:
+        ticks = grid_ticks_ns(start_ns, end_ns, plan.fps)
+    else:
+        ticks, clock = _clock_ticks(plan, chosen, start_ns, end_ns, uri)
     selections: list[tuple[Selection, BoolArray]] = []
     keep: BoolArray = np.ones(ticks.size, dtype=np.bool_)
     for src, topic, stamp in chosen:
         sel = select_for_ticks(
-            topic.stamps(stamp), ticks, strategy=src.strategy, fps=plan.fps, tol_ms=src.tol_ms
+            topic.stamps(stamp), ticks + src.offset_ns, strategy=src.strategy, fps=plan.fps, tol_ms=src.tol_ms
         )
         filled: BoolArray = np.zeros(ticks.size, dtype=np.bool_)
         missing = sel.missing
@@ -139,10 +206,15 @@ def align_sources(
     ticks_kept = ticks[keep]
     sources: list[AlignedSource] = []
     report: list[dict[str, Any]] = []
+    clock_reported = False
     for (src, topic, stamp), kind, (sel, filled) in zip(chosen, kinds, selections, strict=True):
         kept, kept_filled = sel.take(keep), filled[keep]
         sources.append(AlignedSource(src, kind, topic, stamp, kept, kept_filled))
-        report.append(
-            _report(src, stamp, topic.stamps(stamp), kept, kept_filled, ticks_kept, plan.fps, dropped)
+        entry = _report(
+            src, stamp, topic.stamps(stamp), kept, kept_filled, ticks_kept + src.offset_ns, plan.fps, dropped
         )
+        if clock is not None and src.key == clock["key"] and not clock_reported:
+            entry["clock"] = clock
+            clock_reported = True
+        report.append(entry)
     return sources, ticks_kept, report

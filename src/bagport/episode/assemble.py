@@ -15,10 +15,17 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from bagport.align import Selection
+from bagport.align import QuaternionGroup, Selection, blend, quaternion_groups
 from bagport.bags import BagMessage, BagReader
 from bagport.contract.plan import FeatureKind, FeatureSpec, SourceSpec
-from bagport.decode import VectorExtractor, decode_image, make_extractor, resize_rgb
+from bagport.decode import (
+    VectorExtractor,
+    decode_image,
+    find_transform,
+    is_depth,
+    make_extractor,
+    resize_image,
+)
 from bagport.episode.timeline import TopicTimeline
 from bagport.errors import AlignmentError, DecodeError
 
@@ -39,10 +46,14 @@ class AlignedSource:
     filled: npt.NDArray[np.bool_]
     """Ticks whose value comes from ``align.fill`` (held past a gap, or zeros)."""
     extractor: VectorExtractor | None = None
+    quaternions: tuple[QuaternionGroup, ...] = ()
+    """``x, y, z, w`` index groups of the extractor's names: slerped, not blended linearly."""
     cache: dict[int, Any] = field(default_factory=dict)
     last_use: dict[int, int] = field(default_factory=dict)
     needed: npt.NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, dtype=np.bool_))
     required: Int64Array = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    depth: bool = False
+    """A camera whose messages decoded as depth maps (its zeros fill is then invalid depth)."""
 
     def prepare(self) -> None:
         self.needed = np.zeros(self.timeline.count, dtype=np.bool_)
@@ -67,11 +78,13 @@ class AlignedSource:
         if self.selection.hi is not None and self.selection.weight is not None:
             weight = float(self.selection.weight[k])
             if weight > 0:
-                value = (1.0 - weight) * value + weight * self.cache[int(self.selection.hi[k])]
+                value = blend(value, self.cache[int(self.selection.hi[k])], weight, self.quaternions)
         return value
 
     def _zeros(self) -> Any:
         if self.kind is FeatureKind.VIDEO and self.src.resize_hw is not None:
+            if self.depth:
+                return np.full(self.src.resize_hw, np.nan, dtype=np.float32)
             return np.zeros((*self.src.resize_hw, 3), dtype=np.uint8)
         return np.zeros(max(1, len(self.src.names)), dtype=np.float64)
 
@@ -81,18 +94,21 @@ class Frame:
     index: int
     tick_ns: int
     vectors: dict[str, npt.NDArray[np.float64]]
-    images: dict[str, npt.NDArray[np.uint8]]
+    images: dict[str, npt.NDArray[Any]]
+    """RGB uint8 (H, W, 3), or depth float32 (H, W) metres with NaN for invalid."""
 
 
 def _decode(source: AlignedSource, message: BagMessage) -> Any:
     msg = message.msg()
     if source.kind is FeatureKind.VIDEO:
-        rgb = decode_image(msg, source.src.msgtype)
+        image = decode_image(msg, source.src.msgtype)
+        source.depth = is_depth(image)
         if source.src.resize_hw is not None:
-            rgb = resize_rgb(rgb, *source.src.resize_hw)
-        return rgb
+            image = resize_image(image, *source.src.resize_hw)
+        return image
     if source.extractor is None:
         source.extractor = make_extractor(source.src, msg)
+        source.quaternions = quaternion_groups(source.extractor.names)
     return source.extractor(msg)
 
 
@@ -105,17 +121,18 @@ def assemble_frames(
     on_frame: Callable[[Frame], None],
 ) -> int:
     """Stream ``reader`` and call ``on_frame`` for every tick, in order; returns frames emitted."""
-    by_topic: dict[str, list[AlignedSource]] = {}
+    by_topic: dict[str, dict[str, list[AlignedSource]]] = {}
     for source in sources:
         source.prepare()
-        by_topic.setdefault(source.src.topic, []).append(source)
-    arrived = dict.fromkeys(by_topic, 0)
+        by_topic.setdefault(source.src.topic, {}).setdefault(source.src.stream, []).append(source)
+    filters = {s.src.stream: f for s in sources if (f := s.src.stream_filter) is not None}
+    arrived = {stream: 0 for streams in by_topic.values() for stream in streams}
     total = int(ticks_ns.size)
     next_tick = 0
     by_key = {f.key: [s for s in sources if s.src.key == f.key] for f in features}
 
     def ready(k: int) -> bool:
-        return all(arrived[s.src.topic] > s.required[k] for s in sources)
+        return all(arrived[s.src.stream] > s.required[k] for s in sources)
 
     def emit_ready() -> None:
         nonlocal next_tick
@@ -126,16 +143,23 @@ def assemble_frames(
 
     emit_ready()  # ticks made only of fills need no message
     for message in reader.messages(tuple(by_topic)):
-        index = arrived[message.topic]
-        arrived[message.topic] = index + 1
         wanted = False
-        for source in by_topic[message.topic]:
-            if index < source.needed.size and source.needed[index]:
-                wanted = True
-                try:
-                    source.cache[index] = _decode(source, message)
-                except DecodeError as err:
-                    raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
+        for stream, stream_sources in by_topic[message.topic].items():
+            spec = filters.get(stream)
+            if (
+                spec is not None
+                and find_transform(message.msg(), spec.child_frame, spec.parent_frame) is None
+            ):
+                continue  # the same test as the timeline's: this message is no sample of the stream
+            index = arrived[stream]
+            arrived[stream] = index + 1
+            for source in stream_sources:
+                if index < source.needed.size and source.needed[index]:
+                    wanted = True
+                    try:
+                        source.cache[index] = _decode(source, message)
+                    except DecodeError as err:
+                        raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
         if wanted:
             emit_ready()
         if next_tick == total:
@@ -157,7 +181,7 @@ def _frame(
     by_key: dict[str, list[AlignedSource]],
 ) -> Frame:
     vectors: dict[str, npt.NDArray[np.float64]] = {}
-    images: dict[str, npt.NDArray[np.uint8]] = {}
+    images: dict[str, npt.NDArray[Any]] = {}
     for feature in features:
         parts = [source.value(k) for source in by_key[feature.key]]
         if feature.kind is FeatureKind.VIDEO:

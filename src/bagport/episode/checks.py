@@ -15,15 +15,18 @@ __all__ = ["bag_fingerprint", "check_bag_fits", "check_window_has_data"]
 def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
     """Every contract topic exists in the bag, has messages, and has the declared type."""
     available = {t.name: t for t in info.topics}
-    wanted = [(s.topic, s.msgtype, s.key) for s in plan.sources]
-    wanted += [(t.topic, t.type, t.key) for t in plan.task_topics]
-    for topic, msgtype, key in wanted:
+    wanted: list[tuple[str, str, str, int | None]] = [
+        (s.topic, s.msgtype, s.key, s.line) for s in plan.sources
+    ]
+    wanted += [(t.topic, t.type, t.key, None) for t in plan.task_topics]
+    for topic, msgtype, key, line in wanted:
         found = available.get(topic)
         if found is None:
             listing = ", ".join(f"{t.name} ({t.msgtype})" for t in info.topics) or "none"
             raise ContractError(
                 f"topic {topic} (for {key!r}) is not in bag {info.uri}; the bag has: {listing}",
                 file=plan.source_name,
+                line=line,
                 field=key,
                 fix="fix the topic name in the contract, or remove this bag from the manifest.",
             )
@@ -31,6 +34,7 @@ def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
             raise ContractError(
                 f"topic {topic} in bag {info.uri} has type {found.msgtype}, the contract says {msgtype}",
                 file=plan.source_name,
+                line=line,
                 field=f"{key}.type",
                 fix=f"set 'type: {found.msgtype}' for this entry, or map the right topic.",
             )

@@ -18,15 +18,17 @@ from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
+from bagport.episode.cameras import CameraSink
 from bagport.episode.checks import bag_fingerprint, check_bag_fits, check_window_has_data
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
+from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
-from bagport.episode.timeline import scan_timeline
+from bagport.episode.timeline import scan_plan_timeline
 from bagport.errors import DecodeError
-from bagport.qa import EpisodeQA, QAConfig, ValueMonitor
+from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,
@@ -40,8 +42,8 @@ from bagport.staging import (
     staged_path,
     write_json,
 )
-from bagport.stats import ImageStatsAccumulator, stats_to_json, vector_stats
-from bagport.video import EncoderSettings, StreamingEncoder
+from bagport.stats import stats_to_json, vector_stats
+from bagport.video import EncoderSettings
 
 __all__ = ["convert_episode"]
 
@@ -59,27 +61,27 @@ class _EpisodeSinks:
         vector_dtypes = {f.key: f.dtype for f in self.plan.features if f.kind is FeatureKind.VECTOR}
         (self.workdir / "videos").mkdir(parents=True, exist_ok=True)
         self.frames = FrameTableWriter(self.workdir / FRAMES_FILE, self.plan.fps, vector_dtypes)
-        self.encoders: dict[str, StreamingEncoder] = {}
-        self.image_stats: dict[str, ImageStatsAccumulator] = {}
+        self.cameras: dict[str, CameraSink] = {}
         self.widths: dict[str, int] = {}
+        self._camera_sources = {
+            f.key: f.sources[0] for f in self.plan.features if f.kind is FeatureKind.VIDEO
+        }
 
     def on_frame(self, frame: Frame) -> None:
-        for key, rgb in frame.images.items():
-            encoder = self.encoders.get(key)
-            if encoder is None:
-                encoder = StreamingEncoder(
+        for key, image in frame.images.items():
+            camera = self.cameras.get(key)
+            if camera is None:
+                camera = CameraSink(
                     self.workdir / "videos" / f"{key}.mp4",
-                    fps=self.plan.fps,
-                    width=rgb.shape[1],
-                    height=rgb.shape[0],
-                    settings=self.settings,
+                    self._camera_sources[key],
+                    image,
+                    self.plan.fps,
+                    self.settings,
+                    self.fidelity,
+                    self.monitor,
                 )
-                self.encoders[key] = encoder
-                self.image_stats[key] = ImageStatsAccumulator()
-            encoder.write(rgb)
-            self.fidelity.record(key, rgb)
-            self.image_stats[key].update(rgb)
-            self.monitor.add_image(frame.index, key, rgb)
+                self.cameras[key] = camera
+            camera.write(frame.index, image)
         for key, vec in frame.vectors.items():
             width = self.widths.setdefault(key, vec.shape[0])
             if vec.shape[0] != width:
@@ -94,7 +96,7 @@ class _EpisodeSinks:
     def close(self) -> dict[str, Any]:
         """Close every writer; returns video clip infos by key."""
         self.frames.close()
-        return {key: enc.close() for key, enc in self.encoders.items()}
+        return {key: camera.close() for key, camera in self.cameras.items()}
 
 
 def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
@@ -109,20 +111,20 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     reusable = _reusable(request, stamp)
     if reusable is not None:
         return reusable
-    with open_bag(request.bag_uri) as whole:
+    with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as whole:
         info = whole.info
         check_bag_fits(info, plan)
         window = request.window_ns(info.start_ns, info.end_ns)
         reader: BagReader = whole if window is None else BagWindow(whole, *window)
-        timeline = scan_timeline(
-            whole, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics], window
-        )
+        timeline = scan_plan_timeline(whole, plan, window)
         if window is not None:
             check_window_has_data(timeline, window, info.start_ns, request.bag_uri)
         sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
         frame_tasks, task_source = resolve_tasks(
             timeline.tasks, ticks, info.custom_data, request, plan.contract.default_task
         )
+        keys = clip_keys(request, stamp, plan.fps, sources, ticks)
+        reused = find_reusable_clips(request, keys)  # cameras this contract change does not touch
         workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
         try:
             qa_config = QAConfig.model_validate(request.qa)
@@ -130,10 +132,18 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             fidelity = EpisodeFidelity(qa_config.video, workdir / "fidelity-refs", settings.g or 1)
             sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks, monitor, fidelity)
             try:
-                assemble_frames(reader, request.bag_uri, plan.features, sources, ticks, sinks.on_frame)
+                assemble_frames(
+                    reader,
+                    request.bag_uri,
+                    [f for f in plan.features if f.key not in reused],
+                    [s for s in sources if s.src.key not in reused],  # a reused camera is not even read
+                    ticks,
+                    sinks.on_frame,
+                )
             finally:
                 clips = sinks.close()
             video_checks, video_plots = fidelity.check(clips, plan.fps)  # before publishing: refs are scratch
+            extra_plots = _take_reused(workdir, reused, video_checks, video_plots, monitor)
             write_provenance(workdir / PROVENANCE_FILE, sources, ticks)
             extra = [
                 *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
@@ -142,18 +152,20 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             ]
             qa = assess_episode(
                 request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,
-                extra_plots={"fidelity": video_plots} if video_plots else {},
+                extra_plots=extra_plots, alignment=alignment,
             )  # fmt: skip
             (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
-            features = _staged_features(plan, sources, sinks, clips, settings)
+            features = _staged_features(plan, sources, sinks, clips, reused)
             stats: dict[str, Any] = {}
             table = pq.read_table(
                 workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
             )
             for name in table.column_names:
                 stats[name] = stats_to_json(vector_stats(vector_column(table, name)))
-            for key, acc in sinks.image_stats.items():
+            for key, camera in sinks.cameras.items():
+                acc = camera.stats
                 stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
+            stats.update({key: clip.stats for key, clip in reused.items()})
             (workdir / STATS_FILE).write_text(json.dumps(stats))
             target = episode_dir(request.staging_uri, request.episode_id)
             summary = EpisodeSummary(
@@ -172,7 +184,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 task_source=task_source,
                 features=features,
                 stamp_sources={f"{s.src.key}@{s.src.topic}": s.stamp_used for s in sources},
-                videos={key: f"videos/{key}.mp4" for key in clips},
+                videos={f.key: f"videos/{f.key}.mp4" for f in features if f.video_info is not None},
                 metadata=dict(request.metadata),
                 window_ns=window,
                 segment=request.segment,
@@ -185,6 +197,9 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 alignment=alignment,
                 qa=qa_brief(qa),
                 qa_sha256=request.qa_sha256,
+                bag_read={**reader.transfer.to_dict(), "warnings": list(info.warnings)},
+                clip_keys=keys,
+                reused_clips={key: clip.episode_id for key, clip in reused.items()},
             )
             _publish(workdir, target, summary)
         finally:
@@ -206,7 +221,8 @@ def qa_brief(qa: EpisodeQA) -> dict[str, Any]:
 
 
 def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
-    """A completed staged episode of the same bag files, contract, encoder and task default.
+    """A completed staged episode of the same bag files, contract, encoder, task default, QA settings
+    and bagport version.
 
     Re-running a flow after a failure skips the episodes that already finished.
     """
@@ -222,6 +238,7 @@ def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
         and existing.default_task == request.default_task
         and existing.qa_sha256 == request.qa_sha256
         and existing.segment == request.segment
+        and existing.bagport_version == __version__  # another bagport may convert differently
     )
     if not same:
         return None
@@ -239,26 +256,20 @@ def _staged_features(
     sources: list[AlignedSource],
     sinks: _EpisodeSinks,
     clips: dict[str, Any],
-    settings: EncoderSettings,
+    reused: dict[str, ReusedClip],
 ) -> tuple[StagedFeature, ...]:
     out = []
     for feature in plan.features:
         mine = [s for s in sources if s.src.key == feature.key]
         topics = tuple(s.src.topic for s in mine)
+        if feature.key in reused:
+            out.append(replace(reused[feature.key].feature, sources=topics))
+            continue
         if feature.kind is FeatureKind.VIDEO:
             clip = clips[feature.key]
-            video_info = {
-                "video.height": clip.height,
-                "video.width": clip.width,
-                "video.codec": clip.codec,
-                "video.pix_fmt": clip.pix_fmt,
-                "video.fps": plan.fps,
-                "video.channels": 3,
-                "has_audio": False,
-                **settings.to_info(),
-                "is_depth_map": False,
-            }
-            shape = (clip.height, clip.width, 3)
+            camera = sinks.cameras[feature.key]
+            video_info = camera.video_info(clip, plan.fps)
+            shape = (clip.height, clip.width, camera.channels)
             out.append(
                 StagedFeature(
                     feature.key, "video", shape, ("height", "width", "channels"), video_info, topics
@@ -273,6 +284,29 @@ def _staged_features(
             )
         )
     return tuple(out)
+
+
+def _take_reused(
+    workdir: Path,
+    reused: dict[str, ReusedClip],
+    video_checks: list[CheckResult],
+    video_plots: dict[str, Any],
+    monitor: ValueMonitor,
+) -> dict[str, Any]:
+    """Copy the reused clips into the episode and add their QA results; returns the extra QA plots."""
+    plots: dict[str, Any] = {}
+    for key, clip in reused.items():
+        fs, path = url_to_fs(clip.clip_uri)
+        fs.get_file(path, str(workdir / "videos" / f"{key}.mp4"))
+        video_checks.extend(clip.checks)
+        if clip.fidelity_plot is not None:
+            video_plots[key] = clip.fidelity_plot
+    if video_plots:
+        plots["fidelity"] = video_plots
+    means = {key: clip.image_means for key, clip in reused.items() if clip.image_means is not None}
+    if means:
+        plots["image_means"] = {**monitor.plots()["image_means"], **means}
+    return plots
 
 
 def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:

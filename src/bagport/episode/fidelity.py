@@ -5,6 +5,11 @@ The recorders keep block means of the frames given to each encoder in a scratch 
 compared (:mod:`bagport.video.fidelity`). The findings become ``video.*`` QA checks, and the
 per-camera numbers (with the worst frame beside its source, when a check did not pass) go
 into the episode's QA plots for the HTML report.
+
+Depth cameras (frames given as 12-bit codes, H x W) are encoded losslessly, so their check is
+exact (:mod:`bagport.video.depth_fidelity`): every frame is decoded and must give back the
+codes it was encoded from; ``video.frame_mismatch`` and ``video.damaged_frames`` apply, PSNR
+and copy checks do not.
 """
 
 from __future__ import annotations
@@ -21,7 +26,8 @@ from PIL import Image as PILImage
 
 from bagport.qa import CheckResult, judge
 from bagport.qa.config import VideoQA
-from bagport.video import ClipInfo, FidelityParams, FidelityRecorder, compare_clip
+from bagport.video import ClipFidelity, ClipInfo, FidelityParams, FidelityRecorder, compare_clip
+from bagport.video.depth_fidelity import DepthFidelityRecorder, compare_depth_clip
 
 __all__ = ["EpisodeFidelity"]
 
@@ -36,10 +42,19 @@ class EpisodeFidelity:
         self._scratch = scratch
         self._gop = max(1, gop)
         self._recorders: dict[str, FidelityRecorder] = {}
+        self._depth: dict[str, DepthFidelityRecorder] = {}
 
-    def record(self, key: str, rgb: npt.NDArray[np.uint8]) -> None:
-        """The frame just given to ``key``'s encoder (the same array, in the same order)."""
+    def record(self, key: str, rgb: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
+        """The frame just given to ``key``'s encoder (the same array, in the same order):
+        RGB uint8 (H, W, 3), or a depth camera's codes (H, W)."""
         if not self._config.fidelity:
+            return
+        if rgb.ndim == 2:
+            depth = self._depth.get(key)
+            if depth is None:
+                self._scratch.mkdir(parents=True, exist_ok=True)
+                depth = self._depth[key] = DepthFidelityRecorder(self._scratch / f"{key}.crc32")
+            depth.record(rgb.astype(np.uint16, copy=False))
             return
         recorder = self._recorders.get(key)
         if recorder is None:
@@ -53,35 +68,39 @@ class EpisodeFidelity:
                 run=self._gop,
             )
             self._recorders[key] = recorder
-        recorder.record(rgb)
+        recorder.record(rgb.astype(np.uint8, copy=False))
 
     def check(self, clips: dict[str, ClipInfo], fps: int) -> tuple[list[CheckResult], dict[str, Any]]:
         """Compare every closed clip with its references; returns the checks and the report data."""
         checks: list[CheckResult] = []
         plots: dict[str, Any] = {}
         config = self._config
+        for key, depth in self._depth.items():
+            result = compare_depth_clip(clips[key].path, depth, fps=fps)
+            listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
+            checks += [
+                _frame_check(key, result, config),
+                judge(
+                    "video.damaged_frames",
+                    key,
+                    float(result.damaged_frames),
+                    config.damaged_frames,
+                    f"{result.damaged_frames} depth frame(s) decode with codes other than those encoded "
+                    f"(lossless HEVC)"
+                    + (f" (frames {listed})" if listed else "")
+                    + f"; all {result.sampled_frames} frames checked",
+                ),
+            ]
+            plots[key] = result.to_dict()
         for key, recorder in self._recorders.items():
             clip = clips[key]
             result = compare_clip(clip.path, recorder, fps=fps, params=FidelityParams())
-            mismatch = abs(result.frames_expected - result.frames_decoded) + (not result.pts_ok)
-            mismatch += result.decode_error is not None
-            problems = [
-                f"{result.frames_decoded} frames in the clip, {result.frames_expected} encoded"
-                if not result.frames_ok
-                else "",
-                f"timestamp off the grid at frame {result.first_bad_pts_frame}" if not result.pts_ok else "",
-                result.decode_error or "",
-            ]
-            said = (
-                "; ".join(p for p in problems if p)
-                or f"{result.frames_decoded} frames, timestamps on the grid"
-            )
             share = f"{result.sampled_frames} of {result.frames_expected} frames checked"
             psnr = result.psnr_min_db if result.psnr_min_db is not None else 0.0
             where = f" (frame {result.worst_frame_index})" if result.worst_frame_index is not None else ""
             listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
             found = [
-                judge("video.frame_mismatch", key, float(mismatch), config.frame_mismatch, said),
+                _frame_check(key, result, config),
                 judge(
                     "video.psnr_min_db",
                     key,
@@ -119,8 +138,26 @@ class EpisodeFidelity:
         """Delete the reference files (also after a failed episode)."""
         for recorder in self._recorders.values():
             recorder.discard()
+        for depth in self._depth.values():
+            depth.discard()
         self._recorders.clear()
+        self._depth.clear()
         shutil.rmtree(self._scratch, ignore_errors=True)
+
+
+def _frame_check(key: str, result: ClipFidelity, config: VideoQA) -> CheckResult:
+    """``video.frame_mismatch``: frames missing or extra, timestamps off the grid, decode errors."""
+    mismatch = abs(result.frames_expected - result.frames_decoded) + (not result.pts_ok)
+    mismatch += result.decode_error is not None
+    problems = [
+        f"{result.frames_decoded} frames in the clip, {result.frames_expected} encoded"
+        if not result.frames_ok
+        else "",
+        f"timestamp off the grid at frame {result.first_bad_pts_frame}" if not result.pts_ok else "",
+        result.decode_error or "",
+    ]
+    said = "; ".join(p for p in problems if p) or f"{result.frames_decoded} frames, timestamps on the grid"
+    return judge("video.frame_mismatch", key, float(mismatch), config.frame_mismatch, said)
 
 
 def _jpeg_base64(rgb: npt.NDArray[np.uint8]) -> str:

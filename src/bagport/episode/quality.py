@@ -23,6 +23,7 @@ from bagport.qa import (
     QAConfig,
     StreamStamps,
     ValueMonitor,
+    alignment_checks,
     judge,
     stream_checks,
     sync_checks,
@@ -36,7 +37,7 @@ Int64Array = npt.NDArray[np.int64]
 def _streams(timeline: Timeline, sources: Sequence[AlignedSource]) -> list[StreamStamps]:
     by_topic: dict[str, StreamStamps] = {}
     for source in sources:
-        topic = timeline.topics[source.src.topic]
+        topic = timeline.topics[source.src.stream]
         if topic.topic not in by_topic:
             by_topic[topic.topic] = StreamStamps(
                 topic.topic,
@@ -44,6 +45,7 @@ def _streams(timeline: Timeline, sources: Sequence[AlignedSource]) -> list[Strea
                 topic.header_ns,
                 source.stamp_used,
                 source.kind is FeatureKind.VIDEO,
+                topic.publish_ns,
             )
     return list(by_topic.values())
 
@@ -51,7 +53,8 @@ def _streams(timeline: Timeline, sources: Sequence[AlignedSource]) -> list[Strea
 def _aligned(sources: Sequence[AlignedSource]) -> list[AlignedStamps]:
     out = []
     for source in sources:
-        stamps = source.timeline.stamps(source.stamp_used)
+        # in grid time: a source sampled at tick + offset is compared with the tick
+        stamps = source.timeline.stamps(source.stamp_used) - source.src.offset_ns
         lo = source.selection.lo
         valid = (lo >= 0) & ~source.filled
         out.append(
@@ -103,11 +106,14 @@ def assess_episode(
     extra: Sequence[CheckResult],
     fps: int,
     extra_plots: dict[str, Any] | None = None,
+    alignment: Sequence[dict[str, Any]] = (),
 ) -> EpisodeQA:
+    """Every check of one episode; ``alignment`` is :func:`~bagport.episode.alignment.align_sources`'s report."""
     start_ns, end_ns = int(ticks_ns[0]), int(ticks_ns[-1])
     checks, plots = stream_checks(_streams(timeline, sources), start_ns, end_ns, config)
     synced, sync_plots = sync_checks(_aligned(sources), ticks_ns, config.time)
     checks += synced
+    checks += alignment_checks(alignment, config.time)
     checks += monitor.checks()
     checks += extra
     duration_s = int(ticks_ns.size) / fps
@@ -122,5 +128,6 @@ def assess_episode(
             **monitor.plots(),
             "window_ns": [start_ns, end_ns],
             **(extra_plots or {}),
+            "alignment": list(alignment),
         },
     )

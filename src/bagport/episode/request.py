@@ -37,6 +37,8 @@ class EpisodeRequest:
     """``success``, ``failed``, ``discarded`` (from episode events), or ``None``."""
     note: str = ""
     """The event's note, e.g. why an operator marked the demonstration failed."""
+    msg_definitions: dict[str, str] = field(default_factory=dict)
+    """``{type name: .msg text}`` from ``--msg-path``: workers need no access to the folder."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

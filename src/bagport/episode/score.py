@@ -19,7 +19,7 @@ from bagport.episode.checks import check_bag_fits
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.tasks import resolve_tasks
-from bagport.episode.timeline import scan_timeline
+from bagport.episode.timeline import scan_plan_timeline
 from bagport.errors import BagportError, ManifestError
 from bagport.manifest import load_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, ValueMonitor, load_qa_config
@@ -34,12 +34,10 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
     config = QAConfig.model_validate(request.qa)
     uri = request.bag_uri
     try:
-        with open_bag(uri) as reader:
+        with open_bag(uri, msg_definitions=request.msg_definitions) as reader:
             check_bag_fits(reader.info, plan)
-            timeline = scan_timeline(
-                reader, [s.topic for s in plan.sources], [t.topic for t in plan.task_topics]
-            )
-            sources, ticks, _ = align_sources(plan, timeline, uri)
+            timeline = scan_plan_timeline(reader, plan)
+            sources, ticks, alignment = align_sources(plan, timeline, uri)
             try:
                 frame_tasks, _ = resolve_tasks(timeline.tasks, ticks, reader.info.custom_data, request)
             except ManifestError:
@@ -57,13 +55,20 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
                 *safety_check(reader, config, int(ticks[0]), int(ticks[-1])),
                 task_check(config, frame_tasks),
             ]
-            return assess_episode(uri, config, timeline, sources, ticks, monitor, extra, plan.fps)
+            return assess_episode(
+                uri, config, timeline, sources, ticks, monitor, extra, plan.fps, alignment=alignment
+            )
     except BagportError as err:
         return EpisodeQA.failed(uri, str(err))
 
 
 def score_manifest(
-    manifest_uri: str, contract_uri: str, qa_uri: str | None = None, *, workers: int | None = None
+    manifest_uri: str,
+    contract_uri: str,
+    qa_uri: str | None = None,
+    *,
+    workers: int | None = None,
+    msg_definitions: dict[str, str] | None = None,
 ) -> list[QAEntry]:
     """Score every bag of a manifest (in parallel processes), in manifest order."""
     contract_text = read_text(contract_uri, "contract")
@@ -81,6 +86,7 @@ def score_manifest(
             default_task=bag.task,
             metadata=bag.metadata,
             qa=qa.model_dump(mode="json"),
+            msg_definitions=dict(msg_definitions or {}),
         )
         for bag in manifest.bags
     ]

@@ -91,6 +91,7 @@ PROVENANCE_SCHEMA = pa.schema(
         ("message_index_next", pa.int64()),
         ("weight", pa.float64()),
         ("fill", pa.dictionary(pa.int32(), pa.string())),
+        ("source_publish_ns", pa.int64()),
     ]
 )
 
@@ -117,7 +118,7 @@ def _source_block(source: AlignedSource, frames: Int64Array, ticks_ns: Int64Arra
     lo = sel.lo[frames]
     valid = lo >= 0
     at = np.maximum(lo, 0)
-    header = source.timeline.header_ns
+    header, publish = source.timeline.header_ns, source.timeline.publish_ns
     if sel.hi is not None and sel.weight is not None:
         weight = sel.weight[frames].astype(np.float64)
         blended = weight > 0
@@ -142,6 +143,7 @@ def _source_block(source: AlignedSource, frames: Int64Array, ticks_ns: Int64Arra
             next_index,
             weights,
             _constant(source.src.fill, size, present=filled),
+            _array(publish[at], ~valid) if publish is not None else pa.nulls(size, pa.int64()),
         ],
         schema=PROVENANCE_SCHEMA,
     )

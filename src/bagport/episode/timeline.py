@@ -7,16 +7,19 @@ Task prompts (small strings) are collected here too.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
 from bagport.bags import BagMessage, BagReader
-from bagport.errors import BagReadError
+from bagport.contract import ContractPlan
+from bagport.contract.plan import StreamFilter
+from bagport.decode import child_frames, find_transform, transform_stamp_ns
+from bagport.errors import AlignmentError, BagReadError
 
-__all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_timeline"]
+__all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_plan_timeline", "scan_timeline"]
 
 Int64Array = npt.NDArray[np.int64]
 
@@ -28,6 +31,8 @@ class TopicTimeline:
     header_ns: Int64Array | None
     """``None`` when the type has no header, any stamp is zero, or the stamps never advance
     (publishers that stamp every message with one constant time)."""
+    publish_ns: Int64Array | None = None
+    """MCAP publish times, read only for sources with ``stamp: publish``; ``None`` otherwise."""
 
     @property
     def count(self) -> int:
@@ -38,6 +43,10 @@ class TopicTimeline:
             if self.header_ns is None:
                 raise ValueError(f"{self.topic} has no usable header stamps")
             return self.header_ns
+        if source == "publish":
+            if self.publish_ns is None:
+                raise ValueError(f"{self.topic} has no publish times")
+            return self.publish_ns
         return self.log_ns
 
 
@@ -53,43 +62,100 @@ class Timeline:
     tasks: tuple[TaskMessage, ...]
 
 
+def _publish_times(
+    reader: BagReader,
+    log: dict[str, list[int]],
+    topics: tuple[str, ...],
+    start_ns: int | None,
+    stop_ns: int | None,
+) -> dict[str, Int64Array]:
+    """MCAP publish times of ``topics`` logged in ``[start_ns, stop_ns)``, checked message by message
+    against the log times read."""
+    out: dict[str, Int64Array] = {}
+    for topic, (all_log_ns, all_publish_ns) in reader.publish_times_ns(topics).items():
+        inside = np.ones(all_log_ns.shape, dtype=bool)
+        if start_ns is not None:
+            inside &= all_log_ns >= start_ns
+        if stop_ns is not None:
+            inside &= all_log_ns < stop_ns
+        log_ns, publish_ns = all_log_ns[inside], all_publish_ns[inside]
+        if not np.array_equal(log_ns, np.asarray(log[topic], dtype=np.int64)):
+            raise BagReadError(
+                "the publish times read with the mcap library do not line up with the log times",
+                uri=reader.info.uri,
+                topic=topic,
+                fix="use 'align: {stamp: receive}' or 'stamp: header' for this topic.",
+            )
+        out[topic] = publish_ns
+    return out
+
+
 def _task_message(message: BagMessage) -> TaskMessage:
     stamp = message.header_stamp_ns()
     return TaskMessage(stamp if stamp else message.log_time_ns, str(message.msg().data))
+
+
+def _filtered_stamp(message: BagMessage, spec: StreamFilter, seen: dict[str, None]) -> int | None:
+    """The transform's header stamp when the message carries it, else ``None`` (not a sample)."""
+    msg = message.msg()
+    transform = find_transform(msg, spec.child_frame, spec.parent_frame)
+    if transform is None:
+        if len(seen) < 50:
+            seen.update(dict.fromkeys(child_frames(msg)))
+        return None
+    return transform_stamp_ns(transform)
 
 
 def scan_timeline(
     reader: BagReader,
     topics: Iterable[str],
     task_topics: Iterable[str],
+    filters: Mapping[str, StreamFilter] | None = None,
+    publish_topics: Iterable[str] = (),
     window_ns: tuple[int, int] | None = None,
 ) -> Timeline:
-    """Stamps of ``topics`` and the task prompts; with ``window_ns`` (log time, inclusive) only the
-    messages inside it, plus the task prompts before it (a prompt holds until the next)."""
+    """Stamps of every stream; ``topics`` are stream names (see ``SourceSpec.stream``): a topic, or a
+    name in ``filters`` whose samples are only the messages of its topic carrying its transform.
+    MCAP publish times too for ``publish_topics`` (``stamp: publish``; unfiltered streams only).
+    With ``window_ns`` (log time, inclusive) only the messages inside it, plus the task prompts
+    before it (a prompt holds until the next). The reader checks the counts against the bag's index."""
     feature_topics = tuple(topics)
+    filters = dict(filters or {})
     task_set = frozenset(task_topics)
     log: dict[str, list[int]] = {t: [] for t in feature_topics}
     header: dict[str, list[int | None]] = {t: [] for t in feature_topics}
+    by_topic: dict[str, list[str]] = {}
+    for stream in feature_topics:
+        by_topic.setdefault(filters[stream].topic if stream in filters else stream, []).append(stream)
+    frames_seen: dict[str, None] = {}
     tasks: list[TaskMessage] = []
     start_ns, stop_ns = (None, None) if window_ns is None else (window_ns[0], window_ns[1] + 1)
     if start_ns is not None and task_set:
         tasks += [_task_message(m) for m in reader.messages(tuple(sorted(task_set)), stop_ns=start_ns)]
-    wanted = tuple(dict.fromkeys((*feature_topics, *task_set)))
+    wanted = tuple(dict.fromkeys((*by_topic, *task_set)))
     for message in reader.messages(wanted, start_ns=start_ns, stop_ns=stop_ns):
         if message.topic in task_set:
             tasks.append(_task_message(message))
-        if message.topic in log:
-            log[message.topic].append(message.log_time_ns)
-            header[message.topic].append(message.header_stamp_ns())
-    for topic in feature_topics:
-        promised = reader.info.topic(topic)
-        if window_ns is None and promised is not None and promised.count != len(log[topic]):
-            raise BagReadError(
-                f"yielded {len(log[topic])} messages on {topic}, its index promises {promised.count}",
-                uri=reader.info.uri,
-                topic=topic,
-                fix="the bag is truncated or its index is stale: reindex it (`ros2 bag reindex` / `rosbag reindex`).",
+        for stream in by_topic.get(message.topic, ()):
+            spec = filters.get(stream)
+            stamp_ns = (
+                message.header_stamp_ns() if spec is None else _filtered_stamp(message, spec, frames_seen)
             )
+            if spec is not None and stamp_ns is None:
+                continue
+            log[stream].append(message.log_time_ns)
+            header[stream].append(stamp_ns)
+    for stream, spec in filters.items():
+        if stream in log and not log[stream]:
+            raise AlignmentError(
+                f"no message on {spec.topic} carries a transform to child frame {spec.child_frame!r}"
+                + (f" from {spec.parent_frame!r}" if spec.parent_frame else "")
+                + f" (transforms seen: {', '.join(frames_seen) or 'none'})",
+                uri=reader.info.uri,
+                topic=spec.topic,
+                fix="set selector.child_frame (and parent_frame) to a frame the bag publishes.",
+            )
+    publish = _publish_times(reader, log, tuple(dict.fromkeys(publish_topics)), start_ns, stop_ns)
     result: dict[str, TopicTimeline] = {}
     for topic in feature_topics:
         stamps = header[topic]
@@ -100,5 +166,20 @@ def scan_timeline(
             topic=topic,
             log_ns=np.asarray(log[topic], dtype=np.int64),
             header_ns=np.asarray(stamps, dtype=np.int64) if usable else None,
+            publish_ns=publish.get(topic),
         )
     return Timeline(topics=result, tasks=tuple(tasks))
+
+
+def scan_plan_timeline(
+    reader: BagReader, plan: ContractPlan, window_ns: tuple[int, int] | None = None
+) -> Timeline:
+    """:func:`scan_timeline` of every topic a contract reads (publish times where it asks for them)."""
+    return scan_timeline(
+        reader,
+        plan.streams(),
+        [t.topic for t in plan.task_topics],
+        plan.stream_filters(),
+        [s.stream for s in plan.sources if s.stamp == "publish" and s.child_frame is None],
+        window_ns,
+    )

@@ -9,7 +9,7 @@ from __future__ import annotations
 from bagport.qa.config import Gate, QAConfig, load_qa_config
 from bagport.qa.result import CheckResult, EpisodeQA, QAEntry, Verdict, judge, score_checks
 from bagport.qa.streams import StreamStamps, stream_checks
-from bagport.qa.sync import AlignedStamps, sync_checks
+from bagport.qa.sync import AlignedStamps, alignment_checks, sync_checks
 from bagport.qa.values import ValueMonitor
 
 __all__ = [
@@ -22,6 +22,7 @@ __all__ = [
     "StreamStamps",
     "ValueMonitor",
     "Verdict",
+    "alignment_checks",
     "judge",
     "load_qa_config",
     "score_checks",

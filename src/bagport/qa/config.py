@@ -75,6 +75,12 @@ class TimeQA(_Strict):
     camera_action_gap_ms: PositiveFloat = 50.0
     camera_action_gap_share: Gate = Field(default_factory=lambda: _gate(0.05, 0.5, hard=False))
     """Share of frames whose camera image and action are further apart than ``camera_action_gap_ms``."""
+    alignment_error_p95_ms: Gate = Field(default_factory=lambda: _gate(50.0, None, hard=False))
+    """Per source: 95th percentile of ``|tick + offset - source time|`` over frames with a message."""
+    filled_frames: Gate = Field(default_factory=lambda: _gate(1.0, None, hard=False))
+    """Per source: frames without a valid message under its strategy, filled by ``align.fill``."""
+    clock_drift_ms: Gate = Field(default_factory=lambda: _gate(50.0, None, hard=False))
+    """With ``clock: <key>``: largest distance of a frame's true time from ``frame_index / fps``."""
 
 
 class ValuesQA(_Strict):

@@ -30,12 +30,16 @@ class StreamStamps:
     log_ns: Int64Array
     header_ns: Int64Array | None
     stamp_used: str
-    """``header`` or ``receive``: the clock alignment used for this topic."""
+    """``header``, ``publish`` or ``receive``: the clock alignment used for this topic."""
     is_camera: bool = False
+    publish_ns: Int64Array | None = None
+    """MCAP publish times, when the topic is aligned on them (``stamp: publish``)."""
 
     def used_ns(self) -> Int64Array:
         if self.stamp_used == "header" and self.header_ns is not None:
             return self.header_ns
+        if self.stamp_used == "publish" and self.publish_ns is not None:
+            return self.publish_ns
         return self.log_ns
 
 

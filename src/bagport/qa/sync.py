@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -11,7 +12,7 @@ import numpy.typing as npt
 from bagport.qa.config import TimeQA
 from bagport.qa.result import CheckResult, judge
 
-__all__ = ["AlignedStamps", "sync_checks"]
+__all__ = ["AlignedStamps", "alignment_checks", "sync_checks"]
 
 Int64Array = npt.NDArray[np.int64]
 _HISTOGRAM_BINS = 20
@@ -65,3 +66,33 @@ def sync_checks(
                       f"{action.key} command (worst {worst:.0f} ms)")
             )  # fmt: skip
     return checks, {"alignment_error_ms": plots}
+
+
+def alignment_checks(report: Sequence[dict[str, Any]], config: TimeQA) -> list[CheckResult]:
+    """Per source of the alignment report: error p95 and filled frames; the clock stream's drift."""
+    checks = []
+    for entry in report:
+        subject = f"{entry['key']}@{entry['topic']}"
+        error = entry["error_ms"]
+        if error["p95"] is not None:
+            checks.append(
+                judge("time.alignment_error_p95_ms", subject, error["p95"], config.alignment_error_p95_ms,
+                      f"|tick - {entry['stamp']} stamp| median {error['median']:.1f} ms, p95 {error['p95']:.1f} ms, "
+                      f"max {error['max']:.1f} ms under '{entry['strategy']}'; {entry['held_frames']} held, "
+                      f"{entry['interpolated_frames']} interpolated frame(s)")
+            )  # fmt: skip
+        filled = entry["filled_frames"]
+        checks.append(
+            judge("time.filled_frames", subject, filled, config.filled_frames,
+                  f"{filled} frame(s) without a message under '{entry['strategy']}', filled by "
+                  f"'{entry['fill']}'; {entry['dropped_frames']} frame(s) of the episode dropped")
+        )  # fmt: skip
+        clock = entry.get("clock")
+        if clock is not None:
+            drift = clock["drift_ms"]
+            checks.append(
+                judge("time.clock_drift_ms", subject, drift["max"], config.clock_drift_ms,
+                      f"frames follow {clock['key']} ({clock['rate_hz']:.2f} Hz): their true time is off "
+                      f"frame_index / fps by median {drift['median']:.1f} ms, max {drift['max']:.1f} ms")
+            )  # fmt: skip
+    return checks

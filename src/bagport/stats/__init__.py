@@ -11,9 +11,12 @@ from bagport.stats.numeric import (
     histogram_stats,
     vector_stats,
 )
+from bagport.stats.quantiles import QUANTILE_BINS, QuantileHistogram
 
 __all__ = [
     "QUANTILES",
+    "QUANTILE_BINS",
+    "QuantileHistogram",
     "STAT_KEYS",
     "FeatureStats",
     "ImageStatsAccumulator",

@@ -2,8 +2,9 @@
 
 min of mins, max of maxes, count-weighted mean, pooled variance; quantiles are the
 count-weighted mean of per-episode quantiles, as LeRobot 0.6.1 does (an
-approximation for vectors).  Image quantiles are exact: they come from the
-summed pixel histograms.
+approximation for vectors: the dataset writer replaces them with
+:mod:`bagport.stats.quantiles`, within one bin).  Image quantiles are exact: they
+come from the summed pixel histograms.
 """
 
 from __future__ import annotations
@@ -39,9 +40,14 @@ def merge_feature_stats(parts: Sequence[FeatureStats]) -> FeatureStats:
     return merged
 
 
-def merge_histograms(hists: Sequence[npt.NDArray[np.int64]], frames: Sequence[int]) -> FeatureStats:
-    """Exact image stats over several episodes from their pixel histograms."""
-    return histogram_stats(np.sum(np.stack(hists), axis=0), int(sum(frames)))
+def merge_histograms(
+    hists: Sequence[npt.NDArray[np.int64]],
+    frames: Sequence[int],
+    levels: npt.NDArray[np.float64] | None = None,
+) -> FeatureStats:
+    """Exact image stats over several episodes from their pixel histograms (``levels``: see
+    :func:`~bagport.stats.numeric.histogram_stats`)."""
+    return histogram_stats(np.sum(np.stack(hists), axis=0), int(sum(frames)), levels)
 
 
 def stats_to_json(stats: FeatureStats) -> dict[str, Any]:

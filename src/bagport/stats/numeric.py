@@ -2,7 +2,9 @@
 
 Vectors: per dimension, exact quantiles over the episode's frames.  Images: per
 channel in [0, 1] with shape (3, 1, 1), from a 256-bin histogram per channel
-(exact for uint8 pixels), accumulated frame by frame so memory stays flat.
+(exact for uint8 pixels), accumulated frame by frame so memory stays flat.  Depth maps:
+shape (1, 1, 1) in metres (LeRobot does not divide depth by 255), from a histogram of the
+4096 depth codes, so the stats are those of the depth LeRobot's loader returns.
 """
 
 from __future__ import annotations
@@ -38,18 +40,30 @@ def vector_stats(values: npt.NDArray[Any]) -> FeatureStats:
 
 
 class ImageStatsAccumulator:
-    """Streams RGB uint8 frames into per-channel histograms; ``count`` = frames seen."""
+    """Streams frames into per-channel histograms; ``count`` = frames seen.
 
-    def __init__(self, max_side: int = 150) -> None:
+    Colour: RGB uint8 (H, W, 3), 256 bins. Depth: 12-bit codes (H, W) with ``bins=4096`` and
+    ``levels`` = the depth each code decodes to (:meth:`bagport.video.depth.DepthQuantizer.levels`).
+    """
+
+    def __init__(
+        self, max_side: int = 150, *, bins: int = 256, levels: npt.NDArray[np.float64] | None = None
+    ) -> None:
         self._max_side = max_side
-        self._hist = np.zeros((3, 256), dtype=np.int64)
+        self._bins = bins
+        self.levels = levels
+        self._hist: npt.NDArray[np.int64] | None = None
         self._frames = 0
 
-    def update(self, rgb: npt.NDArray[np.uint8]) -> None:
-        step = max(1, max(rgb.shape[0], rgb.shape[1]) // self._max_side)
-        sample = rgb[::step, ::step]
-        for channel in range(3):
-            self._hist[channel] += np.bincount(sample[:, :, channel].ravel(), minlength=256)
+    def update(self, image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
+        step = max(1, max(image.shape[0], image.shape[1]) // self._max_side)
+        sample = image[::step, ::step]
+        if sample.ndim == 2:
+            sample = sample[:, :, None]
+        if self._hist is None:
+            self._hist = np.zeros((sample.shape[2], self._bins), dtype=np.int64)
+        for channel in range(sample.shape[2]):
+            self._hist[channel] += np.bincount(sample[:, :, channel].ravel(), minlength=self._bins)
         self._frames += 1
 
     @property
@@ -57,26 +71,33 @@ class ImageStatsAccumulator:
         return self._frames
 
     def result(self) -> FeatureStats:
-        return histogram_stats(self._hist, self._frames)
+        return histogram_stats(self.histogram(), self._frames, self.levels)
 
     def histogram(self) -> npt.NDArray[np.int64]:
-        return self._hist.copy()
+        return self._hist.copy() if self._hist is not None else np.zeros((3, self._bins), dtype=np.int64)
 
 
-def histogram_stats(hist: npt.NDArray[np.int64], frames: int) -> FeatureStats:
-    """Stats in [0, 1] from per-channel 256-bin pixel histograms."""
-    levels = np.arange(256, dtype=np.float64) / 255.0
+def histogram_stats(
+    hist: npt.NDArray[np.int64], frames: int, levels: npt.NDArray[np.float64] | None = None
+) -> FeatureStats:
+    """Per-channel stats, shape (channels, 1, 1), from pixel histograms (channels x bins).
+
+    ``levels[b]`` is the value bin ``b`` stands for; by default ``b / 255`` (colour in [0, 1]).
+    """
+    if levels is None:
+        levels = np.arange(hist.shape[1], dtype=np.float64) / 255.0
+    channels, last = hist.shape[0], hist.shape[1] - 1
     totals = hist.sum(axis=1).astype(np.float64)
     safe = np.maximum(totals, 1.0)
     mean = (hist * levels).sum(axis=1) / safe
     var = (hist * levels**2).sum(axis=1) / safe - mean**2
     nonzero = hist > 0
     minimum = np.array([levels[np.argmax(row)] if row.any() else 0.0 for row in nonzero])
-    maximum = np.array([levels[255 - np.argmax(row[::-1])] if row.any() else 0.0 for row in nonzero])
+    maximum = np.array([levels[last - np.argmax(row[::-1])] if row.any() else 0.0 for row in nonzero])
     cumulative = np.cumsum(hist, axis=1)
 
     def shaped(vec: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
-        return vec.reshape(3, 1, 1)
+        return vec.reshape(channels, 1, 1)
 
     stats: FeatureStats = {
         "min": shaped(minimum),
@@ -86,6 +107,6 @@ def histogram_stats(hist: npt.NDArray[np.int64], frames: int) -> FeatureStats:
         "count": np.array([frames], dtype=np.int64),
     }
     for key, q in QUANTILES.items():
-        idx = np.array([np.searchsorted(cumulative[c], q * totals[c], side="left") for c in range(3)])
-        stats[key] = shaped(levels[np.minimum(idx, 255)])
+        idx = np.array([np.searchsorted(cumulative[c], q * totals[c], side="left") for c in range(channels)])
+        stats[key] = shaped(levels[np.minimum(idx, last)])
     return stats

@@ -9,7 +9,7 @@ from bagport.synth.faults import Faults, Window
 
 __all__ = ["CameraSpec", "EpisodeSpec"]
 
-CameraKind = Literal["raw", "jpeg", "png"]
+CameraKind = Literal["raw", "jpeg", "png", "compressed_depth"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -17,7 +17,8 @@ class CameraSpec:
     name: str
     kind: CameraKind
     encoding: str = "bgr8"
-    """Raw cameras only: rgb8, bgr8, rgba8, bgra8 or mono8."""
+    """Raw cameras: rgb8, bgr8, rgba8, bgra8, mono8, mono16, 8UC1, 8UC3, bayer_<pattern>8, or depth
+    (16UC1, 32FC1; see :mod:`bagport.synth.images`). ``compressed_depth`` cameras: 16UC1 or 32FC1."""
     height: int = 96
     width: int = 128
     rate_hz: float = 30.0
@@ -27,8 +28,13 @@ class CameraSpec:
     """Gaussian noise (std, in grey levels) on the colour bars, like a real sensor."""
 
     @property
+    def is_depth(self) -> bool:
+        return self.encoding.lower() in ("16uc1", "32fc1")
+
+    @property
     def topic(self) -> str:
-        return f"/{self.name}/image_raw" + ("" if self.kind == "raw" else "/compressed")
+        suffix = {"raw": "", "compressed_depth": "/compressedDepth"}.get(self.kind, "/compressed")
+        return f"/{self.name}/image_raw{suffix}"
 
     @property
     def msgtype(self) -> str:
@@ -61,6 +67,9 @@ class EpisodeSpec:
     """``/done`` (std_msgs/Bool) turns true at these times and false 50 ms later."""
     pauses: tuple[Window, ...] = ()
     """No joint, action or camera message inside these windows (the recorder paused)."""
+    publish_lag_ns: int | None = None
+    """MCAP only: ``publish_time`` = capture time + this (a recorder that stores send times);
+    ``None``: ``publish_time`` = log time, as rosbags writes it."""
 
     JOINT_TOPIC = "/joint_states"
     ACTION_TOPIC = "/cmd"

@@ -19,7 +19,9 @@ from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.errors import BagportError
+from bagport.synth.images import compressed_depth_payload, depth_frame, raw_depth_bytes, raw_image_bytes
 from bagport.synth.pixels import render_frame
+from bagport.synth.publish import rewrite_publish_times
 from bagport.synth.spec import CameraSpec, EpisodeSpec
 from bagport.synth.truth import GroundTruth
 
@@ -55,21 +57,6 @@ class _Messages:
         return self._header(stamp=stamp, frame_id=frame_id)
 
 
-def _raw_bytes(rgb: npt.NDArray[np.uint8], encoding: str) -> tuple[npt.NDArray[np.uint8], int]:
-    if encoding == "rgb8":
-        out = rgb
-    elif encoding == "bgr8":
-        out = rgb[:, :, ::-1]
-    elif encoding in ("rgba8", "bgra8"):
-        colour = rgb if encoding == "rgba8" else rgb[:, :, ::-1]
-        out = np.concatenate([colour, np.full((*rgb.shape[:2], 1), 255, np.uint8)], axis=2)
-    elif encoding == "mono8":
-        out = rgb.mean(axis=2, keepdims=True).astype(np.uint8)
-    else:
-        raise ValueError(f"synthetic raw encoding {encoding!r} is not supported")
-    return np.ascontiguousarray(out).ravel(), out.shape[1] * out.shape[2]
-
-
 def _camera_pixels(
     spec: EpisodeSpec, cam: CameraSpec, k: int, stamp_ns: int, rng: np.random.Generator
 ) -> npt.NDArray[np.uint8]:
@@ -86,10 +73,25 @@ def _camera_pixels(
 def _camera_message(
     msgs: _Messages, spec: EpisodeSpec, cam: CameraSpec, k: int, stamp_ns: int, rng: np.random.Generator
 ) -> Any:
-    rgb = _camera_pixels(spec, cam, k, stamp_ns, rng)
     header = msgs.header(stamp_ns, k, cam.name)
+    if cam.is_depth:
+        depth = depth_frame(cam.height, cam.width, k)
+        if cam.kind == "compressed_depth":
+            payload, fmt = compressed_depth_payload(depth, cam.encoding)
+            return msgs.compressed(header=header, format=fmt, data=np.frombuffer(payload, dtype=np.uint8))
+        data, step = raw_depth_bytes(depth, cam.encoding)
+        return msgs.image(
+            header=header,
+            height=cam.height,
+            width=cam.width,
+            encoding=cam.encoding,
+            is_bigendian=0,
+            step=step,
+            data=data,
+        )
+    rgb = _camera_pixels(spec, cam, k, stamp_ns, rng)
     if cam.kind == "raw":
-        data, step = _raw_bytes(rgb, cam.encoding)
+        data, step = raw_image_bytes(rgb, cam.encoding)
         return msgs.image(
             header=header,
             height=cam.height,
@@ -244,6 +246,10 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
             writer.write(conns[topic], log_ns, msgs.serialize(msg, types[topic]))
     finally:
         writer.close()
+    if storage == "mcap" and spec.publish_lag_ns is not None:
+        lag_ns = spec.publish_lag_ns
+        for file in sorted(path.glob("*.mcap")):
+            rewrite_publish_times(file, ((t, log, stamp + lag_ns) for log, t, _, stamp in _events(truth)))
     return truth
 
 

@@ -1,4 +1,8 @@
-"""Encode RGB frames to an MP4 clip as they arrive: pts = frame index, constant frame rate."""
+"""Encode frames to an MP4 clip as they arrive: pts = frame index, constant frame rate.
+
+Colour clips take RGB uint8 (H, W, 3); depth clips (``pix_fmt`` ``gray12le``, see
+:mod:`bagport.video.depth`) take 12-bit depth codes, uint16 (H, W).
+"""
 
 from __future__ import annotations
 
@@ -13,6 +17,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bagport.errors import VideoError
+from bagport.video.depth import DEPTH_PIX_FMT
 from bagport.video.settings import EncoderSettings
 
 __all__ = ["ClipInfo", "StreamingEncoder"]
@@ -43,12 +48,14 @@ class StreamingEncoder:
             )
         self._path = Path(path)
         self._fps = fps
-        self._shape = (height, width, 3)
+        self._depth = settings.pix_fmt == DEPTH_PIX_FMT
+        self._shape: tuple[int, ...] = (height, width) if self._depth else (height, width, 3)
+        self._dtype = np.dtype(np.uint16 if self._depth else np.uint8)
         self._settings = settings
         try:
             self._container: Any = av.open(str(self._path), mode="w")
             stream: Any = self._container.add_stream(
-                settings.codec, rate=fps, options=settings.codec_options()
+                settings.codec, rate=fps, options=_quiet(settings.codec_options())
             )
         except (av.error.FFmpegError, ValueError) as err:
             raise VideoError(
@@ -63,13 +70,20 @@ class StreamingEncoder:
         self._frames = 0
         self._closed: ClipInfo | None = None
 
-    def write(self, rgb: npt.NDArray[np.uint8]) -> None:
-        if rgb.shape != self._shape or rgb.dtype != np.uint8:
+    def write(self, image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
+        """The next frame: RGB uint8 (H, W, 3), or for a depth clip uint16 depth codes (H, W)."""
+        if image.shape != self._shape or image.dtype != self._dtype:
             raise VideoError(
-                f"{self._path}: frame {self._frames} is {rgb.dtype}{list(rgb.shape)}, the clip is uint8"
-                f"{list(self._shape)}. Fix: set 'image: {{resize: [h, w]}}' so every frame has one size."
+                f"{self._path}: frame {self._frames} is {image.dtype}{list(image.shape)}, the clip is "
+                f"{self._dtype}{list(self._shape)}. Fix: set 'image: {{resize: [h, w]}}' so every frame has "
+                "one size."
             )
-        frame = _video_frame(rgb)
+        if self._depth:
+            frame = av.VideoFrame.from_ndarray(
+                np.ascontiguousarray(image, dtype=np.uint16), format=DEPTH_PIX_FMT
+            )
+        else:
+            frame = _video_frame(image.astype(np.uint8, copy=False))
         frame.pts = self._frames
         frame.time_base = Fraction(1, self._fps)
         try:
@@ -128,6 +142,13 @@ def _video_frame(rgb: npt.NDArray[np.uint8]) -> av.VideoFrame:
             frame: av.VideoFrame = av.VideoFrame.from_ndarray(bgr, format="bgr24").reformat(format="rgb24")
             return frame
     return av.VideoFrame.from_ndarray(np.ascontiguousarray(rgb), format="rgb24")
+
+
+def _quiet(options: dict[str, str]) -> dict[str, str]:
+    """x265 prints a page of banner per clip on stderr unless told otherwise (encoding unchanged)."""
+    if "x265-params" in options and "log-level" not in options["x265-params"]:
+        return {**options, "x265-params": options["x265-params"] + ":log-level=error"}
+    return options
 
 
 def _stream_codec_name(path: Path) -> str:

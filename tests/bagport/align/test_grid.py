@@ -3,14 +3,17 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from hypothesis import given
 from hypothesis import strategies as st
 
 from bagport.align import (
     NS_PER_S,
     Selection,
+    grid_drift_ns,
     grid_ticks_ns,
     hold_fill,
+    reference_ticks_ns,
     select_for_ticks,
     select_hold,
     tick_count,
@@ -97,3 +100,99 @@ def test_hold_fill_carries_the_last_value_forward_but_not_backward() -> None:
     filled_sel, filled = hold_fill(sel)
     assert filled_sel.lo.tolist() == [-1, 0, 0, 0, 1, 1]
     assert filled.tolist() == [False, False, True, True, False, True]
+
+
+@given(start=st.integers(0, 2**60), span=st.integers(0, 100 * NS_PER_S), fps=st.integers(1, 240))
+def test_grid_ticks_strictly_increase_and_drift_zero(start: int, span: int, fps: int) -> None:
+    ticks = grid_ticks_ns(start, start + span, fps)
+    assert ticks[0] == start and ticks[-1] <= start + span
+    assert np.all(np.diff(ticks) > 0)
+    assert not grid_drift_ns(ticks, fps).any()
+
+
+@given(
+    stamps=st.lists(st.integers(0, 10_000), min_size=0, max_size=50),
+    window=st.tuples(st.integers(-100, 10_100), st.integers(-100, 10_100)),
+)
+def test_reference_ticks_are_the_distinct_stamps_in_the_window(
+    stamps: list[int], window: tuple[int, int]
+) -> None:
+    """Out-of-order and duplicated stamps of a clock stream still give strictly increasing ticks."""
+    start, end = window
+    ticks = reference_ticks_ns(np.array(stamps, dtype=np.int64), start, end)
+    assert np.all(np.diff(ticks) > 0)
+    assert ticks.tolist() == sorted({s for s in stamps if start <= s <= end})
+
+
+def test_grid_drift_measures_a_slow_clock() -> None:
+    ticks = np.arange(0, 31, dtype=np.int64) * 34_000_000  # 29.4 Hz against fps 30
+    drift = grid_drift_ns(ticks, 30)
+    assert drift[0] == 0
+    assert drift[30] == 30 * 34_000_000 - NS_PER_S
+
+
+strategies_with_tol = st.sampled_from(["hold", "asof", "drop", "nearest", "interpolate"])
+
+
+@given(
+    stamps=st.lists(st.integers(0, 10_000), min_size=1, max_size=40),
+    ticks=st.lists(st.integers(-100, 10_100), min_size=1, max_size=40),
+    strategy=strategies_with_tol,
+)
+def test_selected_times_never_go_back_as_ticks_advance(
+    stamps: list[int], ticks: list[int], strategy: str
+) -> None:
+    """Monotonic output: for increasing ticks, the selected source times do not decrease."""
+    stamp_arr = np.array(stamps, dtype=np.int64)
+    tick_arr = np.sort(np.array(ticks, dtype=np.int64))
+    sel = select_for_ticks(stamp_arr, tick_arr, strategy=strategy, fps=30, tol_ms=0.002)
+    valid = sel.lo >= 0
+    chosen = stamp_arr[sel.lo[valid]]
+    assert np.all(np.diff(chosen) >= 0)
+    if sel.hi is not None:
+        assert np.all(np.diff(stamp_arr[sel.hi[valid]]) >= 0)
+
+
+def _step(t: npt.NDArray[np.int64]) -> npt.NDArray[np.int64]:
+    """A signal that changes only at multiples of 1000: sampled at its changes, hold is exact."""
+    return (t // 1000) ** 2
+
+
+@given(
+    changes=st.lists(st.integers(0, 20), min_size=1, max_size=21, unique=True),
+    ticks=st.lists(st.integers(0, 25_000), min_size=1, max_size=40),
+)
+def test_hold_is_exact_on_a_signal_sampled_at_its_changes(changes: list[int], ticks: list[int]) -> None:
+    stamp_arr = np.array(sorted(set(changes) | {0}), dtype=np.int64) * 1000
+    values = _step(stamp_arr)
+    tick_arr = np.array(ticks, dtype=np.int64)
+    sel = select_for_ticks(stamp_arr, tick_arr, strategy="hold", fps=30, tol_ms=None)
+    # the true value at the tick is the value at the last change before it
+    last_change = stamp_arr[np.searchsorted(stamp_arr, tick_arr, side="right") - 1]
+    np.testing.assert_array_equal(values[sel.lo], _step(last_change))
+
+
+@given(
+    stamps=st.lists(st.integers(0, 10_000_000), min_size=1, max_size=40, unique=True),
+    ticks=st.lists(st.integers(0, 10_000_000), min_size=1, max_size=40),
+    tol_ms=st.floats(0.001, 20.0),
+)
+def test_nearest_and_asof_exact_within_their_tolerance(
+    stamps: list[int], ticks: list[int], tol_ms: float
+) -> None:
+    stamp_arr = np.array(stamps, dtype=np.int64)
+    tick_arr = np.array(ticks, dtype=np.int64)
+    tol_ns = round(tol_ms * 1e6)
+    nearest = select_for_ticks(stamp_arr, tick_arr, strategy="nearest", fps=30, tol_ms=tol_ms)
+    asof = select_for_ticks(stamp_arr, tick_arr, strategy="asof", fps=30, tol_ms=tol_ms)
+    for k, tick in enumerate(ticks):
+        gaps = np.abs(stamp_arr - tick)
+        if gaps.min() <= tol_ns:
+            assert abs(stamps[nearest.lo[k]] - tick) == gaps.min()
+        else:
+            assert nearest.lo[k] == -1
+        before = stamp_arr[stamp_arr <= tick]
+        if before.size and tick - before.max() <= tol_ns:
+            assert stamps[asof.lo[k]] == before.max()
+        else:
+            assert asof.lo[k] == -1

@@ -42,3 +42,31 @@ def test_draft_lists_what_it_did_not_map_and_cli_refuses_to_overwrite(
     parse_contract(text, str(out))
     assert main(["contract", "init", "--bag", str(bag), "--out", str(out)]) == 2
     assert "already exists" in capsys.readouterr().err
+
+
+def test_draft_maps_trajectory_commands_and_explains_tf(tmp_path: Path) -> None:
+    from rosbags.typesys import Stores, get_typestore  # noqa: PLC0415
+
+    from tests.bagport.decode.bagwriter import write_bag  # noqa: PLC0415
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+    stamp = t["builtin_interfaces/msg/Time"](sec=1, nanosec=0)
+    traj = t["trajectory_msgs/msg/JointTrajectory"](
+        header=t["std_msgs/msg/Header"](stamp=stamp, frame_id=""), joint_names=["a"], points=[]
+    )
+    tf = t["tf2_msgs/msg/TFMessage"](transforms=[])
+    bag = write_bag(
+        tmp_path / "arm",
+        "mcap",
+        store,
+        [
+            ("/arm_controller/joint_trajectory", "trajectory_msgs/msg/JointTrajectory", [(10**9, traj)]),
+            ("/tf", "tf2_msgs/msg/TFMessage", [(10**9, tf)]),
+        ],
+    )
+    with open_bag(str(bag)) as reader:
+        text = draft_contract(reader.info)
+    assert "      topic: /arm_controller/joint_trajectory" in text
+    assert "#   /tf (tf2_msgs/msg/TFMessage): map one transform with selector: {child_frame: <frame>}" in text
+    assert [f.key for f in parse_contract(text, "draft.yaml").features] == ["action"]

@@ -1,0 +1,131 @@
+"""Which files of a bag rosbags should open, and under which names.
+
+Real recordings are messier than the ones we write: a rosbag2 folder may be named
+``*.bag``, a single file may have no suffix, a split recording may come without its
+``metadata.yaml``, or with one whose storage id is empty or whose file list does not
+match the folder. The plan reads what is there: a consistent rosbag2 folder is handed
+to rosbags whole (it honours compression, counts and custom data); anything else is read
+as the data files present, merged in log-time order, with a warning saying why.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path, PurePath
+from typing import Any
+
+import yaml
+
+from bagport.bags.records import Storage
+from bagport.bags.remote import RemotePath
+from bagport.errors import BagReadError
+
+__all__ = ["ReadPlan", "plan_reads"]
+
+SUFFIX = {Storage.ROS1: ".bag", Storage.MCAP: ".mcap", Storage.SQLITE3: ".db3"}
+_DATA_SUFFIXES = (".mcap", ".db3", ".mcap.zstd", ".db3.zstd")
+
+BagPath = Path | RemotePath
+
+
+@dataclass
+class ReadPlan:
+    paths: list[Any]
+    """What rosbags' AnyReader opens (``Path`` or :class:`RemotePath`)."""
+    files: list[BagPath]
+    """Every file of the bag (for names and sizes)."""
+    data_files: list[BagPath]
+    """The files holding messages, in split order (for readers other than rosbags)."""
+    warnings: list[str] = field(default_factory=list)
+    message_compression: bool = False
+    """Payloads are zstd-compressed one by one and rosbags does not know (metadata bypassed)."""
+
+
+def _natural_key(path: BagPath) -> list[Any]:
+    """``rec_2.mcap`` before ``rec_10.mcap``, as rosbag2 numbers its splits."""
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path.name)]
+
+
+def _alias(path: BagPath, name: str, scratch: Path) -> Any:
+    """``path`` presented as ``name`` (rosbags picks its reader by suffix)."""
+    if isinstance(path, RemotePath):
+        return path.renamed(name)
+    link = scratch / name
+    link.symlink_to(path.resolve(), target_is_directory=path.is_dir())
+    return link
+
+
+def _data_files(folder: BagPath) -> list[BagPath]:
+    files = [p for p in folder.iterdir() if p.name.endswith(_DATA_SUFFIXES) and p.is_file()]
+    return sorted(files, key=_natural_key)
+
+
+def _metadata(folder: BagPath, uri: str) -> dict[str, Any] | None:
+    metadata = folder / "metadata.yaml"
+    if not metadata.is_file():
+        return None
+    try:
+        info = yaml.safe_load(metadata.read_text()) or {}
+        return dict(info.get("rosbag2_bagfile_information") or {})
+    except (yaml.YAMLError, OSError, AttributeError, TypeError, ValueError) as err:
+        raise BagReadError(
+            f"metadata.yaml is unreadable ({err})",
+            uri=uri,
+            fix="repair metadata.yaml (`ros2 bag reindex`) or delete it to read the data files present.",
+        ) from err
+
+
+def _metadata_problem(metadata: dict[str, Any], present: list[BagPath]) -> str | None:
+    storage_id = str(metadata.get("storage_identifier") or "")
+    if storage_id not in (Storage.MCAP, Storage.SQLITE3):
+        return f"metadata.yaml has storage id {storage_id!r}"
+    listed = [PurePath(str(x)).name for x in metadata.get("relative_file_paths") or []]
+    names = [p.name for p in present]
+    if sorted(listed) != sorted(names):
+        return f"metadata.yaml lists {listed} but the folder has {names}"
+    return None
+
+
+def plan_reads(path: BagPath, storage: Storage, scratch: Path, uri: str) -> ReadPlan:
+    """The paths to open for a bag at ``path`` whose content is ``storage``."""
+    suffix = SUFFIX[storage]
+    if path.is_file():
+        opened = path if path.suffix == suffix else _alias(path, f"bag{suffix}", scratch)
+        return ReadPlan([opened], [path], [path])
+    present = _data_files(path)
+    metadata = _metadata(path, uri)
+    if metadata is not None:
+        problem = _metadata_problem(metadata, present)
+        if problem is None:
+            folder = _alias(path, "bag", scratch) if path.suffix == ".bag" else path
+            return ReadPlan([folder], [*present, path / "metadata.yaml"], present)
+        mode = str(metadata.get("compression_mode") or "").lower()
+        if mode == "file":
+            raise BagReadError(
+                f"{problem}, and its files are compressed whole (compression_mode file)",
+                uri=uri,
+                fix="fix relative_file_paths and storage_identifier in metadata.yaml to match the folder.",
+            )
+        usable = _usable(present, storage, uri)
+        warning = f"{problem}; reading the {len(usable)} {storage} file(s) present instead"
+        return ReadPlan(
+            list(usable),
+            [*present, path / "metadata.yaml"],
+            usable,
+            [warning],
+            message_compression=mode == "message",
+        )
+    usable = _usable(present, storage, uri)
+    return ReadPlan(list(usable), list(present), usable)
+
+
+def _usable(present: list[BagPath], storage: Storage, uri: str) -> list[BagPath]:
+    usable = [p for p in present if p.suffix == SUFFIX[storage]]
+    if not usable:
+        raise BagReadError(
+            f"has no {SUFFIX[storage]} files (found {[p.name for p in present]})",
+            uri=uri,
+            fix="point the manifest at a rosbag2 folder or at the bag file itself.",
+        )
+    return usable

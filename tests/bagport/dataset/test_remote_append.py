@@ -1,0 +1,148 @@
+"""--append onto a dataset on S3 (moto's server on loopback, through s3fs): new files only, old ones
+untouched, and a crash while publishing is rolled back to the previous version."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+import s3fs
+
+import bagport.dataset.remote
+from bagport.config import ConvertConfig
+from bagport.dataset.remote import recover_remote_publish
+from bagport.dataset.validate import validate_dataset
+from bagport.episode import convert_episode
+from bagport.run import plan_run, reduce_run
+from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+
+pytestmark = pytest.mark.slow
+
+CAMERAS = (
+    CameraSpec("front", "raw", "bgr8", height=32, width=48),
+    CameraSpec("wrist", "jpeg", height=32, width=48),
+)
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("bags")
+    for i, name in enumerate(("a", "b")):
+        write_episode_bag(
+            root / name, "mcap", EpisodeSpec(duration_s=0.6, seed=i, cameras=CAMERAS, task=name)
+        )
+    return root
+
+
+@pytest.fixture
+def s3(s3_env: dict[str, str]) -> s3fs.S3FileSystem:
+    fs = s3fs.S3FileSystem(endpoint_url=s3_env["AWS_ENDPOINT_URL"])
+    if not fs.exists("fleet"):
+        fs.mkdir("fleet")
+    return fs
+
+
+def _append(bags: Path, names: list[str], output: str, staging: Path) -> int:
+    manifest = bags / f"manifest-{'-'.join(names)}.yaml"
+    manifest.write_text("bags:\n" + "".join(f"  - uri: {n}\n" for n in names))
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output=output, encoder=FAST_CODEC, append=True,
+        staging=str(staging),
+    )  # fmt: skip
+    plan = plan_run(config)
+    if plan.requests:
+        reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    return len(plan.requests)
+
+
+def _etags(fs: s3fs.S3FileSystem, root: str) -> dict[str, str]:
+    fs.invalidate_cache()
+    return {path[len(root) + 1 :]: str(fs.info(path)["ETag"]) for path in fs.find(root)}
+
+
+def test_append_on_s3_adds_new_files_and_leaves_old_ones(
+    bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path
+) -> None:
+    assert _append(bags, ["a"], "s3://fleet/appended", tmp_path / "staging") == 1
+    before = _etags(s3, "fleet/appended")
+    assert _append(bags, ["a", "b"], "s3://fleet/appended", tmp_path / "staging") == 1  # only the new bag
+    after = _etags(s3, "fleet/appended")
+    for rel, etag in before.items():
+        if rel.startswith(("data/", "videos/")):
+            assert after[rel] == etag, rel  # never rewritten
+    assert sorted(rel for rel in set(after) - set(before) if not rel.startswith("meta/")) == [
+        "data/chunk-000/file-001.parquet",
+        "videos/observation.images.front/chunk-000/file-001.mp4",
+        "videos/observation.images.wrist/chunk-000/file-001.mp4",
+    ]
+    assert not [rel for rel in after if rel.startswith(".append")]  # no journal or backup left
+    local = tmp_path / "downloaded"
+    s3.get("fleet/appended", str(local), recursive=True)
+    report = validate_dataset(local, repo_id="test/s3-append")
+    assert (report.episodes, report.frames_decoded) == (2, report.frames)
+    assert _append(bags, ["a", "b"], "s3://fleet/appended", tmp_path / "staging") == 0  # nothing new
+
+
+def test_a_crash_while_publishing_on_s3_rolls_back_to_the_previous_version(
+    bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _append(bags, ["a"], "s3://fleet/crashed", tmp_path / "staging")
+    previous = _etags(s3, "fleet/crashed")
+    real_upload = bagport.dataset.remote._upload
+
+    def crash_in_meta(fs: Any, local: Path, remote: str) -> None:
+        if "/meta/" in remote and "stats.json" in remote:
+            raise KeyboardInterrupt  # the process dies after the data, videos and some of meta/ went up
+        real_upload(fs, local, remote)
+
+    monkeypatch.setattr(bagport.dataset.remote, "_upload", crash_in_meta)
+    with pytest.raises(KeyboardInterrupt):
+        _append(bags, ["a", "b"], "s3://fleet/crashed", tmp_path / "staging")
+    crashed = _etags(s3, "fleet/crashed")
+    assert ".append-journal.json" in crashed
+    assert "data/chunk-000/file-001.parquet" in crashed  # uploaded before the crash
+
+    monkeypatch.setattr(bagport.dataset.remote, "_upload", real_upload)
+    assert recover_remote_publish("s3://fleet/crashed")
+    assert _etags(s3, "fleet/crashed") == previous  # the previous version, byte for byte
+    assert _append(bags, ["a", "b"], "s3://fleet/crashed", tmp_path / "staging") == 1
+    local = tmp_path / "downloaded"
+    s3.get("fleet/crashed", str(local), recursive=True)
+    assert validate_dataset(local, repo_id="test/s3-crash").episodes == 2
+
+
+def test_a_crash_while_overwriting_on_s3_rolls_back_and_a_new_write_replaces_stale_files(
+    bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    _append(bags, ["a", "b"], "s3://fleet/overwritten", tmp_path / "staging")
+    previous = _etags(s3, "fleet/overwritten")
+    manifest = bags / "manifest-a-only.yaml"
+    manifest.write_text("bags:\n  - uri: a\n")
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output="s3://fleet/overwritten",
+        encoder=FAST_CODEC, staging=str(tmp_path / "staging"), overwrite=True,
+    )  # fmt: skip
+    plan = plan_run(config)
+    staged = [convert_episode(r).dir_uri for r in plan.requests]
+    real_upload = bagport.dataset.remote._upload
+
+    def crash_at_info(fs: Any, local: Path, remote: str) -> None:
+        if remote.endswith("meta/info.json"):
+            raise KeyboardInterrupt
+        real_upload(fs, local, remote)
+
+    monkeypatch.setattr(bagport.dataset.remote, "_upload", crash_at_info)
+    with pytest.raises(KeyboardInterrupt):
+        reduce_run(plan, staged)
+    assert _etags(s3, "fleet/overwritten") != previous  # half-replaced, with its journal
+    monkeypatch.setattr(bagport.dataset.remote, "_upload", real_upload)
+    plan = plan_run(config)  # planning the next run rolls the crashed one back
+    assert _etags(s3, "fleet/overwritten") == previous
+    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    after = _etags(s3, "fleet/overwritten")
+    assert not [rel for rel in after if rel.startswith(".append")]
+    local = tmp_path / "downloaded"
+    s3.get("fleet/overwritten", str(local), recursive=True)
+    assert validate_dataset(local, repo_id="test/s3-overwrite").episodes == 1

@@ -8,6 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 
 from moto.server import ThreadedMotoServer
+from s3fs import S3FileSystem
 
 __all__ = ["SECRET", "moto_s3"]
 
@@ -34,6 +35,9 @@ def moto_s3() -> Iterator[dict[str, str]]:
     }
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
+    # fsspec caches filesystems by their arguments; one made for an earlier server (the endpoint comes
+    # from the environment, not the arguments) would still point at that server's dead port.
+    S3FileSystem.clear_instance_cache()
     try:
         yield env
     finally:
@@ -43,3 +47,4 @@ def moto_s3() -> Iterator[dict[str, str]]:
             else:
                 os.environ[key] = value
         server.stop()
+        S3FileSystem.clear_instance_cache()

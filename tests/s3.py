@@ -4,10 +4,12 @@ from __future__ import annotations
 
 import os
 import socket
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 
 from moto.server import ThreadedMotoServer
+from s3fs import S3FileSystem
 
 __all__ = ["SECRET", "moto_s3"]
 
@@ -26,6 +28,8 @@ def moto_s3() -> Iterator[dict[str, str]]:
     port = _free_port()
     server = ThreadedMotoServer(ip_address="127.0.0.1", port=port, verbose=False)
     server.start()
+    # moto's backends live in the process, shared by every server it starts: begin with an empty store.
+    urllib.request.urlopen(urllib.request.Request(f"http://127.0.0.1:{port}/moto-api/reset", method="POST"))
     env = {
         "AWS_ACCESS_KEY_ID": "bagport-test",
         "AWS_SECRET_ACCESS_KEY": SECRET,
@@ -34,6 +38,9 @@ def moto_s3() -> Iterator[dict[str, str]]:
     }
     saved = {k: os.environ.get(k) for k in env}
     os.environ.update(env)
+    # fsspec caches filesystems by their arguments; one made for an earlier server (the endpoint comes
+    # from the environment, not the arguments) would still point at that server's dead port.
+    S3FileSystem.clear_instance_cache()
     try:
         yield env
     finally:
@@ -43,3 +50,4 @@ def moto_s3() -> Iterator[dict[str, str]]:
             else:
                 os.environ[key] = value
         server.stop()
+        S3FileSystem.clear_instance_cache()

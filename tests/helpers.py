@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
+from bagport.episode import EpisodeRequest, episode_id_for
 from tests.conftest import REALBAGS, REPO
 
 SAMPLE_CONTRACT = REPO / "configs" / "contracts" / "sample_robot.yaml"
 FAST_CODEC = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 """Near-lossless and quick: for tests that check pixels exactly, not the default codec."""
 
-__all__ = ["FAST_CODEC", "REALBAGS", "REPO", "SAMPLE_CONTRACT", "realbag"]
+__all__ = ["FAST_CODEC", "REALBAGS", "REPO", "SAMPLE_CONTRACT", "episode_request", "realbag"]
 
 
 def realbag(relative: str) -> Path:
@@ -21,3 +23,26 @@ def realbag(relative: str) -> Path:
     if not path.exists():
         pytest.skip(f"real bag fixture {path} is not available (shared/realbags missing)")
     return path
+
+
+def episode_request(
+    bag: Path,
+    staging: Path,
+    contract_text: str | None = None,
+    *,
+    encoder: dict[str, Any] | None = None,
+    task: str | None = None,
+) -> EpisodeRequest:
+    """The request a worker gets for one bag (default: the sample contract, :data:`FAST_CODEC`)."""
+    text = contract_text if contract_text is not None else SAMPLE_CONTRACT.read_text()
+    codec = FAST_CODEC if encoder is None else encoder
+    return EpisodeRequest(
+        episode_id=episode_id_for(str(bag), text, codec),
+        bag_uri=str(bag),
+        manifest_entry=0,
+        staging_uri=str(staging),
+        contract_text=text,
+        contract_name="contract.yaml",
+        encoder=codec,
+        default_task=task,
+    )

@@ -9,28 +9,17 @@ import pyarrow.parquet as pq
 import pytest
 
 from bagport.columns import vector_column
-from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.episode import convert_episode
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, write_episode_bag
 from bagport.video import iter_frames
-from tests.helpers import FAST_CODEC
+from tests.helpers import episode_request
 
 NS = 1_000_000_000
 
 
 def _convert(bag: Path, staging: Path, text: str) -> EpisodeSummary:
-    return convert_episode(
-        EpisodeRequest(
-            episode_id_for(str(bag), text, FAST_CODEC),
-            str(bag),
-            0,
-            str(staging),
-            text,
-            "c.yaml",
-            FAST_CODEC,
-            "t",
-        )
-    )
+    return convert_episode(episode_request(bag, staging, text, task="t"))
 
 
 def _state_contract(strategy: str) -> str:

@@ -11,7 +11,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from bagport.columns import vector_column
-from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.episode import EpisodeRequest, convert_episode
 from bagport.errors import AlignmentError, BagReadError, ContractError, DecodeError, ManifestError
 from bagport.staging import read_summary
 from bagport.synth import (
@@ -23,23 +23,13 @@ from bagport.synth import (
     write_episode_bag,
 )
 from bagport.video import iter_frames
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT, realbag
+from tests.helpers import SAMPLE_CONTRACT, episode_request, realbag
 
 
 def _request(
     bag: Path, staging: Path, contract_text: str | None = None, task: str | None = None
 ) -> EpisodeRequest:
-    text = contract_text if contract_text is not None else SAMPLE_CONTRACT.read_text()
-    return EpisodeRequest(
-        episode_id=episode_id_for(str(bag), text, FAST_CODEC),
-        bag_uri=str(bag),
-        manifest_entry=0,
-        staging_uri=str(staging),
-        contract_text=text,
-        contract_name="contract.yaml",
-        encoder=FAST_CODEC,
-        default_task=task,
-    )
+    return episode_request(bag, staging, contract_text, task=task)
 
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3", "ros1"])

@@ -13,9 +13,9 @@ import bagport.episode.assemble
 import bagport.episode.cameras
 from bagport.dataset import write_dataset
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.episode import EpisodeRequest, convert_episode
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.helpers import SAMPLE_CONTRACT, episode_request
 
 CAMERAS = (
     CameraSpec("front", "raw", "bgr8", height=32, width=48),
@@ -32,9 +32,7 @@ FRONT_RESIZED = SAMPLE_CONTRACT.read_text().replace(
 
 
 def _request(bag: Path, staging: Path, text: str) -> EpisodeRequest:
-    return EpisodeRequest(
-        episode_id_for(str(bag), text, FAST_CODEC), str(bag), 0, str(staging), text, "c.yaml", FAST_CODEC
-    )
+    return episode_request(bag, staging, text)
 
 
 def test_a_changed_state_selector_reuses_both_camera_clips(

@@ -17,11 +17,11 @@ from rosbags.rosbag2 import Writer
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.columns import vector_column
-from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.episode import convert_episode
 from bagport.errors import AlignmentError, ContractError
 from bagport.staging import FRAMES_FILE, PROVENANCE_FILE, QA_FILE, EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, GroundTruth, Window, write_episode_bag
-from tests.helpers import FAST_CODEC
+from tests.helpers import episode_request
 
 NS = 1_000_000_000
 Float = npt.NDArray[np.float64]
@@ -34,18 +34,7 @@ def _bound(rate_hz: float) -> float:
 
 
 def _convert(bag: Path, staging: Path, text: str) -> EpisodeSummary:
-    return convert_episode(
-        EpisodeRequest(
-            episode_id_for(str(bag), text, FAST_CODEC),
-            str(bag),
-            0,
-            str(staging),
-            text,
-            "c.yaml",
-            FAST_CODEC,
-            "t",
-        )
-    )
+    return convert_episode(episode_request(bag, staging, text, task="t"))
 
 
 def _vectors(summary: EpisodeSummary, key: str) -> Float:

@@ -8,10 +8,10 @@ from pathlib import Path
 import pytest
 
 from bagport.bags import open_bag
-from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.episode import EpisodeRequest, convert_episode
 from bagport.segment import segment_request
 from bagport.synth import CameraSpec, EpisodeSpec, split_recording, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.helpers import SAMPLE_CONTRACT, episode_request
 
 S = 1_000_000_000
 CAMERAS = (
@@ -22,16 +22,7 @@ SPEC = EpisodeSpec(duration_s=6.0, cameras=CAMERAS, joint_rate_hz=50.0)
 
 
 def _request(bag: Path, episodes: str, staging: Path | None = None) -> EpisodeRequest:
-    text = SAMPLE_CONTRACT.read_text() + episodes
-    return EpisodeRequest(
-        episode_id=episode_id_for(str(bag), text, FAST_CODEC),
-        bag_uri=str(bag),
-        manifest_entry=0,
-        staging_uri=str(staging or bag.parent / "staging"),
-        contract_text=text,
-        contract_name="contract.yaml",
-        encoder=FAST_CODEC,
-    )
+    return episode_request(bag, staging or bag.parent / "staging", SAMPLE_CONTRACT.read_text() + episodes)
 
 
 def _spans_s(requests: tuple[EpisodeRequest, ...]) -> list[tuple[float, float]]:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -92,7 +93,7 @@ def test_stinger_boat_imu_and_tf(tmp_path: Path) -> None:
     with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
         wanted = [c for c in reader.connections if c.topic in ("/imu/data", "/tf")]
         for connection, _, raw in reader.messages(connections=wanted):
-            msg = reader.deserialize(raw, connection.msgtype)
+            msg: Any = reader.deserialize(raw, connection.msgtype)
             if connection.topic == "/imu/data":
                 o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
                 imu_ns.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
@@ -118,7 +119,9 @@ def test_stinger_boat_imu_and_tf(tmp_path: Path) -> None:
 
 
 @pytest.mark.parametrize(
-    "relative", ["rosbag2_cdr_test_mcap/cdr_test", "rosbag2_cdr_test_sqlite3/cdr_test"], ids=["mcap", "sqlite3"]
+    "relative",
+    ["rosbag2_cdr_test_mcap/cdr_test", "rosbag2_cdr_test_sqlite3/cdr_test"],
+    ids=["mcap", "sqlite3"],
 )
 def test_custom_test_msgs_from_embedded_definitions(tmp_path: Path, relative: str) -> None:
     """test_msgs types are defined only by the bag (MCAP schemas, SQLite's definitions table); dot paths
@@ -145,7 +148,9 @@ def test_custom_test_msgs_from_embedded_definitions(tmp_path: Path, relative: st
     assert dataset.meta.features["observation.state"]["dtype"] == "float64"
     expected = [1.0, 3.1415, -32768.0, 1.125, 1.0, 123.0]  # the messages are all alike
     for k in range(2):  # LeRobot hands float64 columns out as float32 tensors
-        np.testing.assert_array_equal(dataset[k]["observation.state"].numpy(), np.float32(expected))
+        np.testing.assert_array_equal(
+            dataset[k]["observation.state"].numpy(), np.asarray(expected, dtype=np.float32)
+        )
     state = vector_column(pq.read_table(out / "data/chunk-000/file-000.parquet"), "observation.state")
     np.testing.assert_array_equal(state, [expected, expected])
 

@@ -21,7 +21,7 @@ from bagport.decode import (
 )
 from bagport.episode.checks import check_bag_fits
 from bagport.errors import ContractError, DecodeError
-from bagport.segment.check import check_episode_topics
+from bagport.segment import check_episode_topics
 
 __all__ = ["FeatureRow", "describe_features", "format_feature_table"]
 

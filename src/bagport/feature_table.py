@@ -21,6 +21,7 @@ from bagport.decode import (
 )
 from bagport.episode.checks import check_bag_fits
 from bagport.errors import ContractError, DecodeError
+from bagport.segment import check_episode_topics
 
 __all__ = ["FeatureRow", "describe_features", "format_feature_table"]
 
@@ -49,6 +50,7 @@ def describe_features(
     if bag_uri is not None:
         with open_bag(bag_uri, msg_definitions=msg_definitions) as reader:
             check_bag_fits(reader.info, plan)
+            check_episode_topics(reader, plan)
             first = _first_messages(reader, plan)
     rows = []
     for feature in plan.features:
@@ -141,4 +143,24 @@ def format_feature_table(plan: ContractPlan, rows: list[FeatureRow]) -> str:
         lines.extend(f"      <- {source}" for source in row.sources)
     if plan.task_topics:
         lines.append("  task  <- " + ", ".join(t.topic for t in plan.task_topics))
+    if (episodes := _episodes_text(plan)) is not None:
+        lines.append(f"  episodes  <- {episodes}")
     return "\n".join(lines)
+
+
+def _episodes_text(plan: ContractPlan) -> str | None:
+    """How the contract splits bags, e.g. ``events /episode_events (std_msgs/msg/String), gap_s 2,
+    min_duration_s 1``; ``None`` when it does not split them."""
+    options = plan.contract.episodes
+    if options is None:
+        return None
+    parts = [
+        f"{name} {spec.topic} ({spec.type})"
+        for name, spec in (("events", options.events), ("done_signal", options.done_signal))
+        if spec is not None
+    ]
+    if options.gap_s is not None:
+        parts.append(f"gap_s {options.gap_s:g}")
+    if not parts:
+        return None
+    return ", ".join(parts) + f", min_duration_s {options.min_duration_s:g}"

@@ -4,20 +4,33 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
+import pytest
 
+from bagport.bags import open_bag
 from bagport.columns import vector_column
 from bagport.config import ConvertConfig
+from bagport.contract import load_contract, parse_contract
+from bagport.contract.draft import draft_contract
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
+from bagport.errors import ContractError
+from bagport.feature_table import describe_features
 from bagport.run import plan_run, reduce_run
 from tests.helpers import REPO, realbag
 
 
-def _convert(manifest: Path, contract: Path, out: Path) -> None:
-    plan = plan_run(ConvertConfig(manifest=str(manifest), contract=str(contract), output=str(out)))
+def _convert(manifest: Path, contract: Path, out: Path, *, keep_qa_failures: bool = False) -> None:
+    config = ConvertConfig(
+        manifest=str(manifest),
+        contract=str(contract),
+        output=str(out),
+        on_qa_fail="keep" if keep_qa_failures else None,
+    )
+    plan = plan_run(config)
     staged = [convert_episode(request).dir_uri for request in plan.requests]
     reduce_run(plan, staged)
 
@@ -55,3 +68,130 @@ def test_humble_joint_states(tmp_path: Path) -> None:
     info = json.loads((out / "meta/info.json").read_text())
     assert info["total_frames"] == 15  # 1.5 s of 10 Hz joint states on a 10 fps grid
     assert len(info["features"]["observation.state"]["names"]) == 4
+
+
+def _held(stamps_ns: list[int], tick_ns: int) -> int:
+    """Index of the message ``hold`` takes at a tick: the latest stamp at or before it (ties: last logged)."""
+    return max((i for i, t in enumerate(stamps_ns) if t <= tick_ns), key=lambda i: (stamps_ns[i], i))
+
+
+def test_stinger_boat_imu_and_tf(tmp_path: Path) -> None:
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+    from rosbags.highlevel import AnyReader  # noqa: PLC0415
+    from rosbags.typesys import Stores, get_typestore  # noqa: PLC0415
+
+    bag = realbag("stinger_localization/localization_bag")
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {bag}\n")
+    out = tmp_path / "stinger"
+    _convert(manifest, REPO / "configs/contracts/stinger_localization.yaml", out)
+    # ground truth read independently with rosbags (the bag embeds no definitions: Humble's types)
+    imu_ns: list[int] = []
+    imu: list[list[float]] = []
+    tf_ns: list[int] = []
+    tf: list[list[float]] = []
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_HUMBLE)) as reader:
+        wanted = [c for c in reader.connections if c.topic in ("/imu/data", "/tf")]
+        for connection, _, raw in reader.messages(connections=wanted):
+            msg: Any = reader.deserialize(raw, connection.msgtype)
+            if connection.topic == "/imu/data":
+                o, w, a = msg.orientation, msg.angular_velocity, msg.linear_acceleration
+                imu_ns.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+                imu.append([o.x, o.y, o.z, o.w, w.x, w.y, w.z, a.x, a.y, a.z])
+                continue
+            for transform in msg.transforms:
+                if (transform.header.frame_id, transform.child_frame_id) == ("odom", "base_link"):
+                    t, r = transform.transform.translation, transform.transform.rotation
+                    tf_ns.append(transform.header.stamp.sec * 10**9 + transform.header.stamp.nanosec)
+                    tf.append([t.x, t.y, t.z, r.x, r.y, r.z, r.w])
+    start_ns, end_ns = max(min(imu_ns), min(tf_ns)), min(max(imu_ns), max(tf_ns))
+    frames = (end_ns - start_ns) * 10 // 10**9 + 1  # 10 fps grid, both ends inclusive
+    dataset = LeRobotDataset("test/stinger", root=out)
+    assert dataset.meta.total_frames == frames == 376
+    assert dataset.meta.features["observation.pose"]["names"][0] == "base_link.translation.x"
+    assert dataset[0]["task"] == "localize the boat"
+    for k in (0, 1, 137, frames - 1):
+        tick_ns = start_ns + k * 10**9 // 10
+        item = dataset[k]
+        np.testing.assert_allclose(item["observation.imu"].numpy(), imu[_held(imu_ns, tick_ns)], rtol=1e-6)
+        np.testing.assert_allclose(item["observation.pose"].numpy(), tf[_held(tf_ns, tick_ns)], rtol=1e-6)
+    assert len({tuple(row) for row in tf}) > 100  # the boat moves: real values, not a constant
+
+
+@pytest.mark.parametrize(
+    "relative",
+    ["rosbag2_cdr_test_mcap/cdr_test", "rosbag2_cdr_test_sqlite3/cdr_test"],
+    ids=["mcap", "sqlite3"],
+)
+def test_custom_test_msgs_from_embedded_definitions(tmp_path: Path, relative: str) -> None:
+    """test_msgs types are defined only by the bag (MCAP schemas, SQLite's definitions table); dot paths
+    with indices select into arrays and nested messages. 4 + 3 messages over 0.15 s: at 20 fps the grid
+    (from the latest first message to the earliest last one, 81 ms) holds 2 frames."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+
+    contract = tmp_path / "cdr.yaml"
+    contract.write_text(
+        "robot_type: rosbag2_test\nfps: 20\nobservations:\n"
+        "  - key: observation.state\n    topic: /array_topic\n    type: test_msgs/msg/Arrays\n"
+        "    selector: {names: ['bool_values[0]', 'float64_values_default[0]', 'int16_values_default[-1]',"
+        " 'defaults_values[2].float32_value', 'uint64_values_default[1]']}\n    dtype: float64\n"
+        "  - key: observation.state\n    topic: /test_topic\n    type: test_msgs/msg/BasicTypes\n"
+        "    selector: {names: [int32_value]}\n    dtype: float64\n"
+    )
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {realbag(relative)}\n    task: test\n")
+    out = tmp_path / "cdr"
+    _convert(manifest, contract, out, keep_qa_failures=True)  # QA fails a 0.05 s episode: kept, flagged
+    dataset = LeRobotDataset("test/cdr", root=out)
+    assert dataset.meta.total_frames == 2
+    assert json.loads((out / "meta/qa/summary.json").read_text())["episodes"][0]["verdict"] == "fail"
+    assert dataset.meta.features["observation.state"]["dtype"] == "float64"
+    expected = [1.0, 3.1415, -32768.0, 1.125, 1.0, 123.0]  # the messages are all alike
+    for k in range(2):  # LeRobot hands float64 columns out as float32 tensors
+        np.testing.assert_array_equal(
+            dataset[k]["observation.state"].numpy(), np.asarray(expected, dtype=np.float32)
+        )
+    state = vector_column(pq.read_table(out / "data/chunk-000/file-000.parquet"), "observation.state")
+    np.testing.assert_array_equal(state, [expected, expected])
+
+
+def test_mono8_images_from_a_folder_named_dot_bag(tmp_path: Path) -> None:
+    """ros2bag_tools' 2x2 mono8 camera at 1 Hz (stamps from 0) becomes a 3-frame grey video."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+
+    contract = tmp_path / "images.yaml"
+    contract.write_text(
+        "robot_type: mono_camera\nfps: 1\nobservations:\n"
+        "  - {key: observation.images.mono, topic: /image, type: sensor_msgs/msg/Image}\n"
+    )
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {realbag('ros2bag_tools/images.bag')}\n    task: look\n")
+    out = tmp_path / "images"
+    _convert(manifest, contract, out)
+    dataset = LeRobotDataset("test/images", root=out)
+    assert dataset.meta.total_frames == 3
+    assert tuple(dataset.meta.features["observation.images.mono"]["shape"]) == (2, 2, 3)
+    for k in range(3):
+        image = dataset[k]["observation.images.mono"].numpy()  # (3, 2, 2) floats in [0, 1]
+        grey = np.array([[0, 128], [128, 255]]) / 255  # the message's bytes 00 80 80 ff
+        for channel in image:
+            np.testing.assert_allclose(channel, grey, atol=6 / 255)
+
+
+def test_empty_bag_is_a_clear_error(tmp_path: Path) -> None:
+    bag = realbag("rosbagjs_turtlesim/no-messages.bag")
+    plan = load_contract(str(REPO / "configs/contracts/turtlesim.yaml"))
+    with pytest.raises(ContractError, match=r"no-messages\.bag holds no messages \(no topics\)"):
+        describe_features(plan, str(bag))
+
+
+@pytest.mark.parametrize("relative", ["foxglove_chatter_db3/chatter.db3", "rosbag2_split/wbag"])
+def test_string_only_bags_fit_no_contract(relative: str) -> None:
+    """Bags of std_msgs/String topics only carry no feature LeRobot could train on (a String is a task
+    at most): `contract init` maps nothing and says so, and the draft is refused with the fix."""
+    with open_bag(str(realbag(relative))) as reader:
+        draft = draft_contract(reader.info)
+        topics = [t.name for t in reader.info.topics]
+    assert all(f"#   {topic} (std_msgs/msg/String)" in draft for topic in topics)
+    with pytest.raises(ContractError, match=r"declares no features Fix: add at least one entry"):
+        parse_contract(draft, "draft.yaml")

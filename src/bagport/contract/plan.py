@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import NamedTuple
 
@@ -106,6 +106,8 @@ class ContractPlan:
     source_name: str
     features: tuple[FeatureSpec, ...]
     task_topics: tuple[TaskEntry, ...]
+    episode_lines: dict[str, int] = field(default_factory=dict)
+    """Lines of the ``episodes`` section's topics and fields (``events.field`` -> line), for errors."""
 
     @property
     def fps(self) -> int:
@@ -329,5 +331,20 @@ def compile_contract(
             fix=f"use one of {sorted(grouped)}, or remove 'clock' for the fixed grid.",
         )
     return ContractPlan(
-        contract=contract, source_name=source_name, features=tuple(features), task_topics=contract.tasks
+        contract=contract,
+        source_name=source_name,
+        features=tuple(features),
+        task_topics=contract.tasks,
+        episode_lines=_episode_lines(line_of),
     )
+
+
+def _episode_lines(line_of: LineOf | None) -> dict[str, int]:
+    """``events.topic`` -> its line (or its section's line when the key is left out), and so on."""
+    lines: dict[str, int] = {}
+    for section in ("events", "done_signal"):
+        for key in ("topic", "type", "field", "note_field"):
+            line = line_of(("episodes", section, key)) if line_of else None
+            if line is not None:
+                lines[f"{section}.{key}"] = line
+    return lines

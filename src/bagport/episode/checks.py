@@ -19,6 +19,13 @@ def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
         (s.topic, s.msgtype, s.key, s.line) for s in plan.sources
     ]
     wanted += [(t.topic, t.type, t.key, None) for t in plan.task_topics]
+    if not info.topics:
+        raise ContractError(
+            f"bag {info.uri} holds no messages (no topics), so nothing can be converted",
+            file=plan.source_name,
+            fix="check the recording (a recorder that subscribed to nothing writes an empty bag), "
+            "or remove this bag from the manifest.",
+        )
     for topic, msgtype, key, line in wanted:
         found = available.get(topic)
         if found is None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from bagport.segment.check import check_episode_topics
 from bagport.segment.events import event_from_message, parse_event_text
 from bagport.segment.scan import SegmentedBag, segment_bag, segment_request, segments_bags
 from bagport.segment.windows import (
@@ -24,6 +25,7 @@ __all__ = [
     "EventKind",
     "SegmentedBag",
     "Segmentation",
+    "check_episode_topics",
     "done_edges_ns",
     "drop_short",
     "event_from_message",

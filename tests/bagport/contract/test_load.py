@@ -92,6 +92,24 @@ observations:
     assert [s.topic for s in plan.features[0].sources] == ["/arm", "/gripper"]
 
 
+@pytest.mark.parametrize(
+    "path", sorted((REPO / "configs/contracts").glob("*.yaml")), ids=lambda path: str(path.name)
+)
+def test_every_bundled_contract_loads_and_compiles(path: Path) -> None:
+    plan = load_contract(str(path))
+    assert plan.features
+    if path.name == "sample_robot_episodes.yaml":
+        episodes = plan.contract.episodes
+        assert episodes is not None
+        assert episodes.events is not None
+        assert episodes.events.topic == "/episode_events"
+        assert episodes.done_signal is not None
+        assert episodes.done_signal.topic == "/done"
+        assert episodes.gap_s == 2.0
+        lines = plan.episode_lines  # a key left out gives its section's line
+        assert (lines["events.topic"], lines["events.field"], lines["done_signal.type"]) == (41, 40, 45)
+
+
 def test_bundled_sample_contract_loads() -> None:
     plan = load_contract(str(REPO / "configs/contracts/sample_robot.yaml"))
     assert {f.key for f in plan.features} == {

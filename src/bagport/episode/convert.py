@@ -139,6 +139,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                     [s for s in sources if s.src.key not in reused],  # a reused camera is not even read
                     ticks,
                     sinks.on_frame,
+                    plan.source_name,
                 )
             finally:
                 clips = sinks.close()

@@ -50,7 +50,7 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
             vectors = [f for f in plan.features if f.kind is FeatureKind.VECTOR]
             vector_sources = [s for s in sources if s.kind is FeatureKind.VECTOR]
             if vector_sources:
-                assemble_frames(reader, uri, vectors, vector_sources, ticks, on_frame)
+                assemble_frames(reader, uri, vectors, vector_sources, ticks, on_frame, plan.source_name)
             extra = [
                 *safety_check(reader, config, int(ticks[0]), int(ticks[-1])),
                 task_check(config, frame_tasks),

@@ -99,7 +99,9 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(
-            episode_id=episode_id_for(bag.uri, contract_text, config.encoder, window_key(bag.window)),
+            episode_id=episode_id_for(
+                bag.uri, contract_text, config.encoder, window_key(bag.window), msg_definitions
+            ),
             bag_uri=bag.uri,
             manifest_entry=bag.entry,
             staging_uri=staging,

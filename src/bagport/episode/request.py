@@ -128,7 +128,7 @@ def episode_id_for(
     """Stable id: the same bag (window), contract, encoder settings and ``--msg-path`` definitions
     (they change decoding) give the same staged episode."""
     digest = hashlib.sha256()
-    parts = (bag_uri, contract_text, repr(sorted(encoder.items())))
+    parts: tuple[str, ...] = (bag_uri, contract_text, repr(sorted(encoder.items())))
     if window:
         parts += (window,)
     if msg_definitions:

@@ -28,7 +28,7 @@ from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
-from bagport.segment import EXCLUDED_LABELS, segment_request, segments_bags
+from bagport.segment import EXCLUDED_LABELS, label_reason, segment_request, segments_bags
 from bagport.staging import QA_FILE, EpisodeSummary, read_summary
 from bagport.uris import is_local, read_text
 from bagport.video import EncoderSettings
@@ -141,10 +141,6 @@ def segment_all(plan: RunPlan) -> tuple[tuple[EpisodeRequest, ...], tuple[str, .
     return tuple(requests), tuple(ignored)
 
 
-def _label_reason(label: str | None, note: str) -> str:
-    return f"labelled {label}" + (f" ({note})" if note else "") + "; --keep-failed keeps it"
-
-
 def run_record(plan: RunPlan) -> dict[str, Any]:
     return {
         "bagport_version": __version__,
@@ -215,7 +211,7 @@ def select_episodes(
     entries: list[QAEntry] = []
     for (entry, qa, summary, episode), labelled in zip(rows, by_label, strict=True):
         if labelled:
-            row = QAEntry(qa, entry, None, _label_reason(episode.label, episode.note), by_label=True)
+            row = QAEntry(qa, entry, None, label_reason(episode.label, episode.note), by_label=True)
         elif summary is None:
             row = QAEntry(qa, entry, None, f"conversion failed: {qa.error}")
         elif qa.verdict == "fail" and policy == "exclude":

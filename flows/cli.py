@@ -143,23 +143,43 @@ def _cmd_qa(args: argparse.Namespace) -> int:
     from bagport.episode.score import score_manifest  # noqa: PLC0415
 
     entries = score_manifest(
-        args.manifest, args.contract, args.qa, workers=args.workers, msg_definitions=_msg_definitions(args)
+        args.manifest,
+        args.contract,
+        args.qa,
+        workers=args.workers,
+        msg_definitions=_msg_definitions(args),
+        keep_failed=args.keep_failed,
     )
     for entry in entries:
         qa = entry.qa
-        print(f"{qa.verdict:4s} {qa.score:.2f}  bags[{entry.manifest_entry}] {qa.bag_uri}: {qa.headline()}")
+        where = qa.bag_uri + ("" if entry.segment is None else f"#{entry.segment}")
+        label = f" ({entry.label})" if entry.label else ""
+        reason = f"excluded: {entry.excluded_reason}" if entry.by_label else qa.headline()
+        print(f"{qa.verdict:4s} {qa.score:.2f}  bags[{entry.manifest_entry}] {where}{label}: {reason}")
     if args.report:
         from bagport.qa.report import render_report  # noqa: PLC0415
 
         Path(args.report).write_text(
             render_report(
-                entries, {"manifest": args.manifest, "contract": args.contract, "bags": len(entries)}
+                entries,
+                {
+                    "manifest": args.manifest,
+                    "contract": args.contract,
+                    "bags": len({e.manifest_entry for e in entries}),
+                    "episodes": len(entries),
+                },
             ),
             encoding="utf-8",
         )
         print(f"report: {args.report}", file=sys.stderr)
-    failing = sum(e.qa.verdict == "fail" for e in entries)
-    print(f"{len(entries) - failing} of {len(entries)} bag(s) pass QA", file=sys.stderr)
+    # episodes left out for their label (failed / discarded demonstrations) do not fail the command
+    scored = [e for e in entries if not e.by_label]
+    failing = sum(e.qa.verdict == "fail" for e in scored)
+    unit = "bag(s)" if all(e.segment is None for e in entries) else "episode(s)"
+    labelled = (
+        f" ({len(entries) - len(scored)} more excluded for their label)" if len(scored) < len(entries) else ""
+    )
+    print(f"{len(scored) - failing} of {len(scored)} {unit} pass QA{labelled}", file=sys.stderr)
     return 1 if failing else 0
 
 
@@ -294,6 +314,11 @@ def _parser() -> argparse.ArgumentParser:
     qa.add_argument("--qa", default=None, help="QA thresholds YAML (default: built-in)")
     qa.add_argument("--report", default=None, help="write a self-contained HTML report here")
     qa.add_argument("--workers", type=int, default=None, help="bags scored in parallel (default: CPU count)")
+    qa.add_argument(
+        "--keep-failed",
+        action="store_true",
+        help="score episodes labelled failed or discarded like the others (default: listed as excluded)",
+    )
     qa.set_defaults(func=_cmd_qa)
 
     inspect = sub.add_parser("inspect", help="print what `ros2 bag info` prints, without ROS")

@@ -22,7 +22,7 @@ from bagport.dataset.history import dataset_report
 from bagport.episode import EpisodeRequest
 from bagport.errors import BagportError, QualityError
 from bagport.run import EpisodeFailure, RunPlan, plan_run
-from bagport.segment import segments_bags
+from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
 from flows.local_server import take_launched
 from tasks.episode import convert_episode_task
@@ -129,8 +129,8 @@ def _segment(plan: RunPlan) -> tuple[list[EpisodeRequest], list[EpisodeFailure]]
         result = future.result()
         assert isinstance(result, dict)  # completed: the task returned the requests
         if not result["requests"]:
-            reasons = "; ".join(result["ignored"]) or "the bag is empty"
-            failures.append(EpisodeFailure.of(request, f"no episode found in the bag ({reasons})"))
+            none_found = SegmentedBag((), tuple(result["ignored"])).none_found()
+            failures.append(EpisodeFailure.of(request, none_found))
         requests += [EpisodeRequest(**item) for item in result["requests"]]
     return requests, failures
 

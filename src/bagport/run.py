@@ -28,7 +28,7 @@ from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
-from bagport.segment import EXCLUDED_LABELS, segment_request, segments_bags
+from bagport.segment import EXCLUDED_LABELS, label_reason, segment_request, segments_bags
 from bagport.staging import QA_FILE, EpisodeSummary, read_summary
 from bagport.uris import is_local, read_text
 from bagport.video import EncoderSettings
@@ -99,7 +99,9 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(
-            episode_id=episode_id_for(bag.uri, contract_text, config.encoder, window_key(bag.window)),
+            episode_id=episode_id_for(
+                bag.uri, contract_text, config.encoder, window_key(bag.window), msg_definitions
+            ),
             bag_uri=bag.uri,
             manifest_entry=bag.entry,
             staging_uri=staging,
@@ -137,10 +139,6 @@ def segment_all(plan: RunPlan) -> tuple[tuple[EpisodeRequest, ...], tuple[str, .
         requests += found.requests
         ignored += [f"{request.bag_uri}: {reason}" for reason in found.ignored]
     return tuple(requests), tuple(ignored)
-
-
-def _label_reason(label: str | None, note: str) -> str:
-    return f"labelled {label}" + (f" ({note})" if note else "") + "; --keep-failed keeps it"
 
 
 def run_record(plan: RunPlan) -> dict[str, Any]:
@@ -213,7 +211,7 @@ def select_episodes(
     entries: list[QAEntry] = []
     for (entry, qa, summary, episode), labelled in zip(rows, by_label, strict=True):
         if labelled:
-            row = QAEntry(qa, entry, None, _label_reason(episode.label, episode.note), by_label=True)
+            row = QAEntry(qa, entry, None, label_reason(episode.label, episode.note), by_label=True)
         elif summary is None:
             row = QAEntry(qa, entry, None, f"conversion failed: {qa.error}")
         elif qa.verdict == "fail" and policy == "exclude":

@@ -119,8 +119,13 @@ def assemble_frames(
     sources: Sequence[AlignedSource],
     ticks_ns: Int64Array,
     on_frame: Callable[[Frame], None],
+    contract_name: str = "contract",
 ) -> int:
-    """Stream ``reader`` and call ``on_frame`` for every tick, in order; returns frames emitted."""
+    """Stream ``reader`` and call ``on_frame`` for every tick, in order; returns frames emitted.
+
+    A message that cannot be decoded raises a :class:`DecodeError` naming the bag, topic, time and
+    the contract entry (``contract_name:line``) that reads it.
+    """
     by_topic: dict[str, dict[str, list[AlignedSource]]] = {}
     for source in sources:
         source.prepare()
@@ -159,7 +164,8 @@ def assemble_frames(
                     try:
                         source.cache[index] = _decode(source, message)
                     except DecodeError as err:
-                        raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
+                        located = err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns)
+                        raise _at_entry(located, source.src, contract_name) from err
         if wanted:
             emit_ready()
         if next_tick == total:
@@ -172,6 +178,12 @@ def assemble_frames(
             fix="the bag changed while it was read, or it is corrupt; re-run, or reindex the bag.",
         )
     return total
+
+
+def _at_entry(err: DecodeError, src: SourceSpec, contract_name: str) -> DecodeError:
+    """The error naming the contract entry whose selector or decoder met the message."""
+    entry = f"{src.where(contract_name)}, {src.section}[key={src.key}]"
+    return DecodeError(f"{err.what} ({entry})", uri=err.uri, topic=err.topic, t_ns=err.t_ns, fix=err.fix)
 
 
 def _frame(

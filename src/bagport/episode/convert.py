@@ -13,20 +13,19 @@ import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport import __version__
-from bagport.bags import BagReader, BagWindow, open_bag, source_stamp
+from bagport.bags import open_bag, source_stamp
 from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
 from bagport.episode.cameras import CameraSink
-from bagport.episode.checks import bag_fingerprint, check_bag_fits, check_window_has_data
+from bagport.episode.checks import bag_fingerprint, scan_episode
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
-from bagport.episode.timeline import scan_plan_timeline
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.staging import (
@@ -113,12 +112,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         return reusable
     with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as whole:
         info = whole.info
-        check_bag_fits(info, plan)
-        window = request.window_ns(info.start_ns, info.end_ns)
-        reader: BagReader = whole if window is None else BagWindow(whole, *window)
-        timeline = scan_plan_timeline(whole, plan, window)
-        if window is not None:
-            check_window_has_data(timeline, window, info.start_ns, request.bag_uri)
+        reader, timeline, window = scan_episode(whole, plan, request)
         sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
         frame_tasks, task_source = resolve_tasks(
             timeline.tasks, ticks, info.custom_data, request, plan.contract.default_task
@@ -139,6 +133,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                     [s for s in sources if s.src.key not in reused],  # a reused camera is not even read
                     ticks,
                     sinks.on_frame,
+                    plan.source_name,
                 )
             finally:
                 clips = sinks.close()

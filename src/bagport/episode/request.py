@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
@@ -91,7 +92,9 @@ class EpisodeRequest:
         )
         return replace(
             windowed,
-            episode_id=episode_id_for(self.bag_uri, self.contract_text, self.encoder, windowed.window_key()),
+            episode_id=episode_id_for(
+                self.bag_uri, self.contract_text, self.encoder, windowed.window_key(), self.msg_definitions
+            ),
         )
 
     @property
@@ -99,15 +102,38 @@ class EpisodeRequest:
         return hashlib.sha256(self.contract_text.encode()).hexdigest()
 
     @property
+    def qa_scoring(self) -> dict[str, Any]:
+        """The QA settings that shape the staged scores (``on_fail`` is applied when the dataset is written)."""
+        return {k: v for k, v in self.qa.items() if k != "on_fail"}
+
+    @property
     def qa_sha256(self) -> str:
-        return hashlib.sha256(json.dumps(self.qa, sort_keys=True).encode()).hexdigest()
+        return hashlib.sha256(json.dumps(self.qa_scoring, sort_keys=True).encode()).hexdigest()
 
 
-def episode_id_for(bag_uri: str, contract_text: str, encoder: dict[str, Any], window: str = "") -> str:
-    """Stable id: the same bag (window), contract and encoder settings give the same staged episode."""
+def msg_definitions_sha256(msg_definitions: Mapping[str, str]) -> str:
+    """Digest of the ``--msg-path`` definitions a worker decodes with; empty without any."""
+    if not msg_definitions:
+        return ""
+    return hashlib.sha256(json.dumps(sorted(msg_definitions.items())).encode()).hexdigest()
+
+
+def episode_id_for(
+    bag_uri: str,
+    contract_text: str,
+    encoder: dict[str, Any],
+    window: str = "",
+    msg_definitions: Mapping[str, str] | None = None,
+) -> str:
+    """Stable id: the same bag (window), contract, encoder settings and ``--msg-path`` definitions
+    (they change decoding) give the same staged episode."""
     digest = hashlib.sha256()
-    parts = (bag_uri, contract_text, repr(sorted(encoder.items())))
-    for part in parts + ((window,) if window else ()):
+    parts: tuple[str, ...] = (bag_uri, contract_text, repr(sorted(encoder.items())))
+    if window:
+        parts += (window,)
+    if msg_definitions:
+        parts += (f"msg:{msg_definitions_sha256(msg_definitions)}",)
+    for part in parts:
         digest.update(part.encode())
         digest.update(b"\0")
     stem = bag_uri.rstrip("/").rsplit("/", 1)[-1]

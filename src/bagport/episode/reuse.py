@@ -3,11 +3,12 @@ decoded and encoded the same way, is not decoded or encoded again.
 
 Each staged episode records a *clip key* per camera: a digest of the bag (URI and file stamp), the
 camera's contract source (topic, type, stamp, strategy, resize, decoder, fill), which message feeds
-every frame (the per-tick selection), the frame ticks, the fps, the encoder and QA settings and the
-bagport version. When a new contract changes something else (a state selector, an action, a task
-topic), the frame grid and the camera's selection stay the same, so the key does too, and the clip
-(with its image stats and its image/video QA results) is copied from the earlier staged episode of
-the same bag. Reuse needs the earlier episode in the staging store: keep it with ``--keep-staging``.
+every frame (the per-tick selection), the frame ticks, the fps, the encoder and QA settings, the
+``--msg-path`` definitions and the bagport version. When a new contract changes something else (a
+state selector, an action, a task topic), the frame grid and the camera's selection stay the same, so
+the key does too, and the clip (with its image stats and its image/video QA results) is copied from
+the earlier staged episode of the same bag. Reuse needs the earlier episode in the staging store:
+keep it with ``--keep-staging``.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from fsspec.core import url_to_fs
 from bagport import __version__
 from bagport.contract import FeatureKind
 from bagport.episode.assemble import AlignedSource
-from bagport.episode.request import EpisodeRequest
+from bagport.episode.request import EpisodeRequest, msg_definitions_sha256
 from bagport.qa import CheckResult
 from bagport.staging import (
     EPISODE_SUMMARY,
@@ -80,7 +81,11 @@ def clip_keys(
         if source.kind is not FeatureKind.VIDEO:
             continue
         digest = hashlib.sha256()
-        settings = json.dumps([request.encoder, request.qa], sort_keys=True, default=str)
+        settings = json.dumps(
+            [request.encoder, request.qa_scoring, msg_definitions_sha256(request.msg_definitions)],
+            sort_keys=True,
+            default=str,
+        )
         src = replace(source.src, line=None)  # where the entry sits in the file does not change the clip
         for part in (request.bag_uri, stamp, __version__, fps, settings, src, source.stamp_used):
             _digest_value(digest, part)

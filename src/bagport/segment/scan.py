@@ -35,6 +35,10 @@ class SegmentedBag:
     requests: tuple[EpisodeRequest, ...]
     ignored: tuple[str, ...] = ()
 
+    def none_found(self) -> str:
+        """The error for a bag in which no episode was found."""
+        return f"no episode found in the bag ({'; '.join(self.ignored) or 'the bag is empty'})"
+
 
 def segments_bags(plan: ContractPlan) -> bool:
     """Whether the contract asks for episodes inside bags (else one bag is one episode)."""
@@ -97,7 +101,7 @@ def segment_request(request: EpisodeRequest) -> SegmentedBag:
     if options is None or not segments_bags(plan) or request.has_window:
         return SegmentedBag((request,))
     stream_topics = tuple(dict.fromkeys(src.topic for src in plan.sources))
-    with open_bag(request.bag_uri) as reader:
+    with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as reader:
         segmentation = segment_bag(reader, options, stream_topics)
     requests = tuple(
         request.for_window(k, w.start_ns, w.end_ns, w.label, w.note)

@@ -33,6 +33,7 @@ __all__ = [
     "Segmentation",
     "done_edges_ns",
     "drop_short",
+    "label_reason",
     "split_at_done",
     "split_at_gaps",
     "windows_from_events",
@@ -50,6 +51,11 @@ class EventKind(StrEnum):
 OUTCOME_LABELS = {EventKind.SUCCESS: "success", EventKind.FAIL: "failed", EventKind.DISCARD: "discarded"}
 EXCLUDED_LABELS = frozenset({"failed", "discarded"})
 """Labels whose episodes are left out of the dataset unless asked to keep them."""
+
+
+def label_reason(label: str | None, note: str) -> str:
+    """Why an episode is left out for its label (one of :data:`EXCLUDED_LABELS`)."""
+    return f"labelled {label}" + (f" ({note})" if note else "") + "; --keep-failed keeps it"
 
 
 @dataclass(frozen=True, slots=True)

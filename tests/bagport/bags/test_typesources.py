@@ -20,6 +20,7 @@ from bagport.episode import convert_episode
 from bagport.errors import BagReadError
 from bagport.feature_table import describe_features
 from bagport.run import plan_run, reduce_run
+from bagport.staging import read_summary
 from flows.cli import main
 from tests.bagport.decode.bagwriter import write_bag
 
@@ -147,6 +148,38 @@ def test_msg_path_defines_it_for_inspect_check_and_convert(
     got = np.stack([dataset[k]["observation.gripper"].numpy() for k in range(FRAMES)])
     np.testing.assert_array_equal(got, _expected())
     assert dataset.meta.features["observation.gripper"]["names"] == ["gain[1]", "mode", "tip.z"]
+
+
+def test_changed_msg_definitions_reconvert_and_unchanged_ones_reuse(
+    bare_sqlite: Path, msg_path: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    contract = tmp_path / "c.yaml"
+    contract.write_text(CONTRACT)
+    manifest = tmp_path / "manifest.yaml"
+    manifest.write_text(f"bags:\n  - {{uri: {bare_sqlite}, task: grip}}\n")
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(contract), output=str(tmp_path / "ds"), msg_path=str(msg_path)
+    )
+    first = convert_episode(plan_run(config).requests[0])
+    # the same definitions, and a QA policy applied only when the dataset is written: reused, not read
+    again = plan_run(config.model_copy(update={"on_qa_fail": "keep", "keep_failed": True})).requests[0]
+    assert again.episode_id == first.episode_id
+    with monkeypatch.context() as patched:
+        patched.setattr("bagport.episode.convert.open_bag", _must_not_open)
+        assert convert_episode(again) == first
+    # a changed definition decodes differently: a new staged episode, converted from the bag
+    (msg_path / "acme_msgs" / "msg" / "Gripper.msg").write_text(
+        GRIPPER_MSG.replace("int32 mode", "uint32 mode")
+    )
+    changed = plan_run(config).requests[0]
+    assert changed.episode_id != first.episode_id
+    converted = convert_episode(changed)
+    assert converted.dir_uri != first.dir_uri
+    assert read_summary(converted.dir_uri) == converted
+
+
+def _must_not_open(*args: object, **kwargs: object) -> None:
+    raise AssertionError("an unchanged episode was converted again")
 
 
 def _check_reads_gripper(bag: Path) -> None:

@@ -101,6 +101,20 @@ def test_missing_topic_names_the_bag_and_lists_what_it_has(tmp_path: Path) -> No
     assert not (tmp_path / "staging").exists()
 
 
+def test_selector_that_does_not_fit_names_the_contract_line(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5))
+    text = SAMPLE_CONTRACT.read_text().replace("position.j6]", "position.j9]", 1)
+    line = 1 + text.splitlines().index("  - key: observation.state")
+    with pytest.raises(
+        DecodeError,
+        match=rf"\['j9'\] not in .*\(contract\.yaml:{line}, observations\[key=observation\.state\]\)"
+        r" \[topic=/joint_states, t_ns=\d+\]",
+    ):
+        convert_episode(_request(bag, tmp_path / "staging", text))
+    assert not (tmp_path / "staging").exists()
+
+
 def test_no_task_anywhere_is_an_error_and_manifest_task_is_the_fallback(tmp_path: Path) -> None:
     bag = tmp_path / "ep"
     write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5, task=None))

@@ -30,7 +30,7 @@ class Progress:
     """A progress artifact updated as episodes finish."""
 
     def __init__(self, total: int) -> None:
-        self._total = max(total, 1)
+        self._total = total
         self._done = 0
         artifact_id = create_progress_artifact(0.0, key="bagport-progress", description=self._text())
         assert isinstance(artifact_id, UUID)  # sync context: Prefect returns the id, not a coroutine
@@ -39,9 +39,17 @@ class Progress:
     def _text(self) -> str:
         return f"{self._done} of {self._total} episode(s) converted"
 
+    def add(self, episodes: int) -> None:
+        """More episodes to convert (a bag was split into its episodes)."""
+        self._total += episodes
+        update_progress_artifact(self._id, self._percent(), description=self._text())
+
+    def _percent(self) -> float:
+        return 100.0 * self._done / max(self._total, 1)
+
     def advance(self) -> None:
         self._done += 1
-        update_progress_artifact(self._id, 100.0 * self._done / self._total, description=self._text())
+        update_progress_artifact(self._id, self._percent(), description=self._text())
         for listener in LISTENERS:
             listener(self._done, self._total)
 

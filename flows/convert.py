@@ -50,41 +50,48 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
             "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
         )
         return dataset_report(config.output)
-    requests, failures = _segment(plan)
+    episodes = _Episodes(plan)
+    failures: list[EpisodeFailure] = []
+    if segments_bags(plan.contract):
+        # Each bag's episodes start converting as soon as that bag is split, while the others are.
+        segmenting = [_submit_segment(plan, request) for request in plan.requests]
+        position = {id(f): i for i, f in enumerate(segmenting)}
+        for done in as_completed(segmenting):
+            bag = plan.requests[position[id(done)]]
+            found, failure = _segments_of(bag, done)
+            episodes.submit(position[id(done)], found)
+            if failure is None:
+                continue
+            failures.append(failure)
+            if config.fail_fast:
+                unfinished = _cancel_unfinished(segmenting) + _cancel_unfinished(episodes.futures)
+                message = (
+                    f"bags[{failure.manifest_entry}] {failure.bag_uri} could not be split into episodes "
+                    f"({failure.error}) and --fail-fast is set: the run stopped ({unfinished} task(s) were not "
+                    f"finished) and nothing was written at {config.output}. Fix: correct or remove that bag, or "
+                    "leave out --fail-fast to convert the others and list the failures."
+                )
+                logger.error("%s", message)
+                return Failed(message=message)
+    else:
+        episodes.submit_bags(plan.requests)
     unsegmented = len(failures)  # bags that could not even be split into episodes
-    if failures and config.fail_fast:
-        first = failures[0]
-        message = (
-            f"bags[{first.manifest_entry}] {first.bag_uri} could not be split into episodes ({first.error}) "
-            f"and --fail-fast is set: the run stopped and nothing was written at {config.output}. Fix: correct "
-            "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
-        )
-        logger.error("%s", message)
-        return Failed(message=message)
-    futures = []
-    for request in requests:
-        label = request.name
-        # Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
-        with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
-            futures.append(convert_episode_task.submit(request.to_dict(), label=label))
-    progress = Progress(len(futures))
-    request_of = {id(f): r for f, r in zip(futures, requests, strict=True)}
-    for done in as_completed(futures):
+    for done in as_completed(episodes.futures):
         done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
-        progress.advance()
-        stop = _fail_fast_reason(plan, request_of[id(done)], done) if config.fail_fast else None
+        episodes.progress.advance()
+        stop = _fail_fast_reason(plan, episodes.request_of(done), done) if config.fail_fast else None
         if stop is not None:
-            unfinished = _cancel_unfinished(futures)
+            unfinished = _cancel_unfinished(episodes.futures)
             message = (
-                f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {len(futures)} episode(s) were "
-                f"not finished) and nothing was written at {config.output}. Finished episodes stay in the staging "
-                f"store {config.resolved_staging()} and a re-run reuses them. Fix: correct or remove that bag, "
-                "or leave out --fail-fast to convert the others and list the failures."
+                f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {len(episodes.futures)} "
+                f"episode(s) were not finished) and nothing was written at {config.output}. Finished episodes "
+                f"stay in the staging store {config.resolved_staging()} and a re-run reuses them. Fix: correct "
+                "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
             )
             logger.error("%s", message)
             return Failed(message=message)
     staged: list[dict[str, Any]] = []
-    for request, future in zip(requests, futures, strict=True):
+    for request, future in episodes.in_plan_order():
         state = future.state
         if state.is_completed():
             result = future.result()
@@ -97,7 +104,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         logger.warning(
             "%d of %d episode(s) failed; the QA policy (on_fail: %s) decides what happens to the run:\n%s",
             len(failures),
-            len(requests) + unsegmented,
+            len(episodes.futures) + unsegmented,
             plan.qa.on_fail,
             "\n".join(f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures),
         )
@@ -110,29 +117,65 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     return report
 
 
-def _segment(plan: RunPlan) -> tuple[list[EpisodeRequest], list[EpisodeFailure]]:
-    """One request per episode: bags split into their episodes by mapped tasks when the contract asks."""
-    if not segments_bags(plan.contract):
-        return list(plan.requests), []
-    futures = []
-    for request in plan.requests:
-        with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
-            futures.append(segment_bag_task.submit(request.to_dict(), label=_label(request.bag_uri)))
-    requests: list[EpisodeRequest] = []
-    failures: list[EpisodeFailure] = []
-    for request, future in zip(plan.requests, futures, strict=True):
-        future.wait()
-        state = future.state
-        if not state.is_completed():
-            failures.append(EpisodeFailure.of(request, state.message or str(state.name)))
-            continue
-        result = future.result()
-        assert isinstance(result, dict)  # completed: the task returned the requests
-        if not result["requests"]:
-            none_found = SegmentedBag((), tuple(result["ignored"])).none_found()
-            failures.append(EpisodeFailure.of(request, none_found))
-        requests += [EpisodeRequest(**item) for item in result["requests"]]
-    return requests, failures
+class _Episodes:
+    """The conversion tasks submitted so far, with their requests and place in the plan."""
+
+    def __init__(self, plan: RunPlan) -> None:
+        self._plan = plan
+        self.progress = Progress(0)
+        self.futures: list[PrefectFuture[Any]] = []
+        self._requests: list[EpisodeRequest] = []
+        self._order: list[tuple[int, int]] = []
+        self._index: dict[int, int] = {}
+
+    def submit(self, bag_position: int, requests: list[EpisodeRequest]) -> None:
+        """The episodes of the bag at ``bag_position`` in the plan, in their order inside it."""
+        self.progress.add(len(requests))
+        for i, request in enumerate(requests):
+            self._submit((bag_position, i), request)
+
+    def submit_bags(self, requests: tuple[EpisodeRequest, ...]) -> None:
+        """One episode per bag, in plan order."""
+        self.progress.add(len(requests))
+        for i, request in enumerate(requests):
+            self._submit((i, 0), request)
+
+    def _submit(self, place: tuple[int, int], request: EpisodeRequest) -> None:
+        # Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
+        with tags(f"robot:{self._plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
+            future = convert_episode_task.submit(request.to_dict(), label=request.name)
+        self._index[id(future)] = len(self.futures)
+        self.futures.append(future)
+        self._requests.append(request)
+        self._order.append(place)
+
+    def request_of(self, future: PrefectFuture[Any]) -> EpisodeRequest:
+        return self._requests[self._index[id(future)]]
+
+    def in_plan_order(self) -> list[tuple[EpisodeRequest, PrefectFuture[Any]]]:
+        """Episodes in manifest order, then in their order inside the bag (not in finishing order)."""
+        ranked = sorted(range(len(self.futures)), key=self._order.__getitem__)
+        return [(self._requests[i], self.futures[i]) for i in ranked]
+
+
+def _submit_segment(plan: RunPlan, request: EpisodeRequest) -> PrefectFuture[Any]:
+    with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
+        return segment_bag_task.submit(request.to_dict(), label=_label(request.bag_uri))
+
+
+def _segments_of(
+    request: EpisodeRequest, future: PrefectFuture[Any]
+) -> tuple[list[EpisodeRequest], EpisodeFailure | None]:
+    """A finished segmentation's episode requests, or why the bag gave none."""
+    future.wait()
+    state = future.state
+    if not state.is_completed():
+        return [], EpisodeFailure.of(request, state.message or str(state.name))
+    result = future.result()
+    assert isinstance(result, dict)  # completed: the task returned the requests
+    if not result["requests"]:
+        return [], EpisodeFailure.of(request, SegmentedBag((), tuple(result["ignored"])).none_found())
+    return [EpisodeRequest(**item) for item in result["requests"]], None
 
 
 def _fail_fast_reason(plan: RunPlan, request: EpisodeRequest, future: PrefectFuture[Any]) -> str | None:

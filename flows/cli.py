@@ -129,10 +129,12 @@ def _convert(args: argparse.Namespace) -> int:
     for row in report.excluded:
         where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
         print(f"excluded bags[{row['manifest_entry']}] {where}: {row['reason']}", file=sys.stderr)
+    qa_report = f"; QA report: {report.root.rstrip('/')}/{report.qa_report}" if report.qa_report else ""
     print(
-        f"converted {report.duration_s:.1f} s of recordings ({report.episodes} episode(s), "
-        f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time; QA report: "
-        f"{report.root.rstrip('/')}/meta/qa/report.html",
+        # an append reports the whole dataset, not only the episodes it added
+        f"{'the dataset now holds' if args.append else 'converted'} {report.duration_s:.1f} s of recordings "
+        f"({report.episodes} episode(s), "
+        f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time{qa_report}",
         file=sys.stderr,
     )
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run

@@ -11,11 +11,11 @@ import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 
-from bagport.bags import open_bag
+from bagport.bags import BagReader, BagWindow, open_bag
 from bagport.contract import FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import Frame, assemble_frames
-from bagport.episode.checks import check_bag_fits
+from bagport.episode.checks import check_bag_fits, check_window_has_data
 from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.tasks import resolve_tasks
@@ -34,12 +34,19 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
     config = QAConfig.model_validate(request.qa)
     uri = request.bag_uri
     try:
-        with open_bag(uri, msg_definitions=request.msg_definitions) as reader:
-            check_bag_fits(reader.info, plan)
-            timeline = scan_plan_timeline(reader, plan)
+        with open_bag(uri, msg_definitions=request.msg_definitions) as whole:
+            info = whole.info
+            check_bag_fits(info, plan)
+            window = request.window_ns(info.start_ns, info.end_ns)  # a manifest entry's window, as converted
+            reader: BagReader = whole if window is None else BagWindow(whole, *window)
+            timeline = scan_plan_timeline(whole, plan, window)
+            if window is not None:
+                check_window_has_data(timeline, window, info.start_ns, uri)
             sources, ticks, alignment = align_sources(plan, timeline, uri)
             try:
-                frame_tasks, _ = resolve_tasks(timeline.tasks, ticks, reader.info.custom_data, request)
+                frame_tasks, _ = resolve_tasks(
+                    timeline.tasks, ticks, info.custom_data, request, plan.contract.default_task
+                )
             except ManifestError:
                 frame_tasks = []
             monitor = ValueMonitor(config.values, plan.fps, int(ticks.size))
@@ -87,6 +94,7 @@ def score_manifest(
             metadata=bag.metadata,
             qa=qa.model_dump(mode="json"),
             msg_definitions=dict(msg_definitions or {}),
+            **bag.window,
         )
         for bag in manifest.bags
     ]

@@ -86,8 +86,9 @@ def _markdown(report: DatasetReport) -> str:
         f"- frames: {report.frames}, duration: {report.duration_s:.1f} s, size: {report.size_bytes / 1e6:.1f} MB",
         f"- tasks: {', '.join(report.tasks)}",
         f"- videos: {', '.join(report.video_keys) or 'none'}",
-        f"- QA report: `{report.root.rstrip('/')}/meta/qa/report.html`",
     ]
+    if report.qa_report:
+        lines.append(f"- QA report: `{report.root.rstrip('/')}/{report.qa_report}`")
     if report.excluded:
         lines += ["", "## Excluded", ""]
         lines += [f"- `{_episode_name(row)}` ({row['bag_uri']}): {row['reason']}" for row in report.excluded]

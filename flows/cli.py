@@ -129,10 +129,12 @@ def _convert(args: argparse.Namespace) -> int:
     for row in report.excluded:
         where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
         print(f"excluded bags[{row['manifest_entry']}] {where}: {row['reason']}", file=sys.stderr)
+    qa_report = f"; QA report: {report.root.rstrip('/')}/{report.qa_report}" if report.qa_report else ""
     print(
-        f"converted {report.duration_s:.1f} s of recordings ({report.episodes} episode(s), "
-        f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time; QA report: "
-        f"{report.root.rstrip('/')}/meta/qa/report.html",
+        # an append reports the whole dataset, not only the episodes it added
+        f"{'the dataset now holds' if args.append else 'converted'} {report.duration_s:.1f} s of recordings "
+        f"({report.episodes} episode(s), "
+        f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time{qa_report}",
         file=sys.stderr,
     )
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
@@ -249,7 +251,9 @@ def _parser() -> argparse.ArgumentParser:
 
     convert = sub.add_parser("convert", help="convert the bags of a manifest with a contract (Prefect flow)")
     bags = convert.add_mutually_exclusive_group(required=True)
-    bags.add_argument("--manifest", help="manifest YAML (bags: [{uri, task, metadata}])")
+    bags.add_argument(
+        "--manifest", help="manifest YAML (bags: [{uri, task, metadata, start_s/end_s or start_ns/end_ns}])"
+    )
     bags.add_argument(
         "--glob", help="every bag matching this glob instead of a manifest, e.g. 's3://fleet/2026-*/*.mcap'"
     )
@@ -279,9 +283,15 @@ def _parser() -> argparse.ArgumentParser:
         help="add the bags not yet in the dataset at --output as new episodes (created if missing)",
     )
     convert.add_argument("--keep-staging", action="store_true", help="keep staged episodes after success")
-    convert.add_argument("--chunks-size", type=int, default=1000)
-    convert.add_argument("--data-files-size-in-mb", type=float, default=100)
-    convert.add_argument("--video-files-size-in-mb", type=float, default=200)
+    convert.add_argument(
+        "--chunks-size", type=int, default=1000, help="files per chunk-NNN folder (default: 1000)"
+    )
+    convert.add_argument(
+        "--data-files-size-in-mb", type=float, default=100, help="data file rotation size (default: 100)"
+    )
+    convert.add_argument(
+        "--video-files-size-in-mb", type=float, default=200, help="video file rotation size (default: 200)"
+    )
     convert.add_argument(
         "--qa", default=None, help="QA thresholds YAML (default: built-in, see configs/qa.yaml)"
     )
@@ -289,7 +299,7 @@ def _parser() -> argparse.ArgumentParser:
         "--on-qa-fail",
         choices=["exclude", "keep", "fail_run"],
         default=None,
-        help="episodes failing QA or conversion: leave out (default), keep and flag, or fail the run",
+        help="episodes failing QA or conversion: leave out, keep and flag, or fail the run (default: the QA file's on_fail, built-in exclude)",
     )
     convert.add_argument(
         "--keep-failed",

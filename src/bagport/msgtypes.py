@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["IMAGE_TYPES", "RosType"]
+__all__ = ["IMAGE_TYPES", "TF_TYPES", "RosType"]
 
 
 class RosType(StrEnum):
@@ -24,6 +24,9 @@ class RosType(StrEnum):
     JOINT_TRAJECTORY = "trajectory_msgs/msg/JointTrajectory"
     TF_MESSAGE = "tf2_msgs/msg/TFMessage"
     MULTI_DOF_COMMAND = "control_msgs/msg/MultiDOFCommand"
+    TF_MESSAGE_ROS1 = "tf/msg/tfMessage"
 
 
 IMAGE_TYPES = frozenset({RosType.IMAGE.value, RosType.COMPRESSED_IMAGE.value})
+TF_TYPES = frozenset({RosType.TF_MESSAGE.value, RosType.TF_MESSAGE_ROS1.value})
+"""/tf messages: tf2's, and ROS 1 tf's older ``tf/tfMessage`` (the same fields)."""

@@ -195,3 +195,27 @@ def test_string_only_bags_fit_no_contract(relative: str) -> None:
     assert all(f"#   {topic} (std_msgs/msg/String)" in draft for topic in topics)
     with pytest.raises(ContractError, match=r"declares no features Fix: add at least one entry"):
         parse_contract(draft, "draft.yaml")
+
+
+def test_ros1_tf_lookup_matches_the_pose_it_was_broadcast_from(tmp_path: Path) -> None:
+    """ROS 1 ``tf/tfMessage`` (the pre-tf2 type on old bags' /tf) works as a TF lookup."""
+    bag = realbag("rosbagjs_turtlesim/example.bag")
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {bag}\n    task: drive the turtle\n")
+    contract = tmp_path / "c.yaml"
+    contract.write_text(
+        "robot_type: turtlesim\nfps: 30\nobservations:\n"
+        "  - key: observation.state\n    topic: /turtle1/pose\n    type: turtlesim/Pose\n"
+        "    selector: {names: [x, y]}\n"
+        "  - key: observation.tf\n    topic: /tf\n    type: tf/tfMessage\n"
+        "    selector: {child_frame: turtle1, names: [translation.x, translation.y]}\n"
+    )
+    out = tmp_path / "tf"
+    _convert(manifest, contract, out)
+    info = json.loads((out / "meta/info.json").read_text())
+    assert info["features"]["observation.tf"]["names"] == ["turtle1.translation.x", "turtle1.translation.y"]
+    data = pq.read_table(out / "data/chunk-000/file-000.parquet")
+    pose, tf = vector_column(data, "observation.state"), vector_column(data, "observation.tf")
+    # turtle_tf broadcasts world -> turtle1 from each pose, in the same instant: the two streams agree
+    np.testing.assert_allclose(tf, pose, atol=1e-5)
+    assert np.ptp(tf[:, 0]) > 1.0  # the turtle moves: not a constant

@@ -80,3 +80,23 @@ def test_qa_scores_each_episode_of_a_segmented_bag_and_lists_labelled_ones_as_ex
     ]
     assert entries[0].qa.duration_s == pytest.approx(2.0, abs=0.1)
     assert entries[2].qa.duration_s == pytest.approx(1.0, abs=0.1)
+
+
+def test_qa_scores_a_manifest_window_with_the_contract_default_task(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """As a conversion would: only the entry's window is scored, and `default_task` counts as a task."""
+    write_episode_bag(
+        tmp_path / "nan.bag", "ros1", EpisodeSpec(duration_s=2.5, faults=Faults(joint_nan_at_s=1.5))
+    )
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text("bags:\n  - uri: nan.bag\n    end_s: 1.2\n  - uri: nan.bag\n    start_s: 1.0\n")
+    contract = tmp_path / "c.yaml"
+    contract.write_text(SAMPLE_CONTRACT.read_text().split("\ntasks:")[0] + "\ndefault_task: pick\n")
+    code = main(["qa", "--manifest", str(manifest), "--contract", str(contract), "--workers", "1"])
+    out, _ = capfd.readouterr()
+    before, after = out.splitlines()[:2]
+    assert code == 1
+    assert not before.startswith("fail"), before  # the NaN at 1.5 s is outside [0, 1.2] s
+    assert "content.task_missing" not in out
+    assert after.startswith("fail 0.") and "values.non_finite observation.state" in after

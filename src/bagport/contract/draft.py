@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 
 from bagport.bags.records import BagInfo, TopicInfo
-from bagport.msgtypes import IMAGE_TYPES, RosType
+from bagport.msgtypes import IMAGE_TYPES, TF_TYPES, RosType
 
 __all__ = ["draft_contract"]
 
@@ -59,7 +59,7 @@ def draft_contract(info: BagInfo, *, robot_type: str = "my_robot", fps: int = 30
             )
         elif topic.msgtype == RosType.STRING and _TASK_WORDS.search(topic.name):
             tasks += _entry("task", topic)
-        elif topic.msgtype == RosType.TF_MESSAGE:
+        elif topic.msgtype in TF_TYPES:
             unmapped.append(
                 f"#   {topic.name} ({topic.msgtype}): map one transform with selector: {{child_frame: <frame>}}"
             )

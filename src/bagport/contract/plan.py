@@ -16,7 +16,7 @@ from bagport.contract.model import (
     TaskEntry,
 )
 from bagport.errors import ContractError
-from bagport.msgtypes import IMAGE_TYPES, RosType
+from bagport.msgtypes import IMAGE_TYPES, TF_TYPES, RosType
 
 __all__ = [
     "ContractPlan",
@@ -189,7 +189,7 @@ def action_offset_ns(contract: Contract, source_name: str) -> int:
 
 def _check_frames(src: SourceSpec, section: str, source_name: str) -> None:
     field = f"{section}[key={src.key}].selector"
-    if src.msgtype == RosType.TF_MESSAGE and src.child_frame is None and src.decoder is None:
+    if src.msgtype in TF_TYPES and src.child_frame is None and src.decoder is None:
         raise ContractError(
             f"{src.key!r} reads {src.topic} ({src.msgtype}), which carries many transforms: say which one",
             file=source_name,
@@ -197,9 +197,10 @@ def _check_frames(src: SourceSpec, section: str, source_name: str) -> None:
             field=f"{field}.child_frame",
             fix="add 'selector: {child_frame: <frame>}' (optionally parent_frame), e.g. child_frame: tool0.",
         )
-    if src.msgtype != RosType.TF_MESSAGE and (src.child_frame or src.parent_frame):
+    if src.msgtype not in TF_TYPES and (src.child_frame or src.parent_frame):
         raise ContractError(
-            f"selector.child_frame / parent_frame only apply to {RosType.TF_MESSAGE}, not {src.msgtype}",
+            f"selector.child_frame / parent_frame only apply to {RosType.TF_MESSAGE} (or ROS 1 tf/tfMessage), "
+            f"not {src.msgtype}",
             file=source_name,
             line=src.line,
             field=f"{field}.child_frame",

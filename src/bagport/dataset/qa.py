@@ -77,10 +77,11 @@ def write_qa(
     dataset: dict[str, Any],
     config: dict[str, Any],
     run_number: int = 0,
-) -> None:
+) -> str:
     """Write the QA table, summary and HTML report under ``root/meta/qa``.
 
     An append (``run_number`` > 0) adds its own table file and report, and extends the summary.
+    Returns the report's path in the dataset (``meta/qa/report[-NNN].html``).
     """
     table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
     table_path.parent.mkdir(parents=True, exist_ok=True)
@@ -100,3 +101,4 @@ def write_qa(
     }
     summary_path.write_text(json.dumps(summary, indent=1))
     (root / report_path).write_text(render_report(entries, dataset), encoding="utf-8")
+    return report_path

@@ -43,6 +43,8 @@ class DatasetReport:
     """Bags left out (QA failure or conversion error), with the reason."""
     qa: tuple[dict[str, Any], ...] = ()
     """Every bag's QA brief: episode index (None when excluded), score, verdict, reason."""
+    qa_report: str | None = None
+    """This run's HTML QA report in the dataset (an append's is ``meta/qa/report-NNN.html``)."""
 
 
 def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeature, ...]:
@@ -163,8 +165,11 @@ def _build(
         e if e.episode_index is None else replace(e, episode_index=e.episode_index + first_episode)
         for e in qa
     ]
-    if entries:
+    qa_report = (
         write_qa(root, entries, facts, qa_config, base.run_number if base is not None else 0)
+        if entries
+        else None
+    )
     return DatasetReport(
         str(root),
         first_episode + len(summaries),
@@ -175,6 +180,7 @@ def _build(
         total_frames / fps,
         tuple(e.brief() for e in entries if e.episode_index is None),
         tuple(e.brief() for e in entries),
+        qa_report,
     )
 
 
@@ -264,6 +270,7 @@ def write_dataset(
         report.duration_s,
         report.excluded,
         report.qa,
+        report.qa_report,
     )
 
 

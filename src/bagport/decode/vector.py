@@ -13,7 +13,7 @@ from bagport.decode.joints import joint_state_extractor, joint_trajectory_extrac
 from bagport.decode.paths import Vector, VectorExtractor, paths_extractor
 from bagport.decode.tf import tf_extractor
 from bagport.errors import DecodeError
-from bagport.msgtypes import RosType
+from bagport.msgtypes import TF_TYPES, RosType
 
 __all__ = ["VectorExtractor", "make_extractor"]
 
@@ -86,7 +86,7 @@ def make_extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
         return joint_trajectory_extractor(src.topic, src.names, first_msg)
     if src.msgtype == RosType.MULTI_DOF_COMMAND:
         return multi_dof_extractor(src.topic, src.names, first_msg)
-    if src.msgtype == RosType.TF_MESSAGE and src.child_frame is not None:
+    if src.msgtype in TF_TYPES and src.child_frame is not None:
         return tf_extractor(src.topic, src.names, src.child_frame, src.parent_frame)
     if src.names:
         return paths_extractor(src.topic, src.names)

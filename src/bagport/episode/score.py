@@ -118,6 +118,7 @@ def score_manifest(
             qa=qa.model_dump(mode="json"),
             **bag.window,
             msg_definitions=dict(msg_definitions or {}),
+            **bag.window,
         )
         for bag in manifest.bags
     ]

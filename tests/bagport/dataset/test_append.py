@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from bagport.config import ConvertConfig
+from bagport.dataset import DatasetReport
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
 from bagport.errors import DatasetWriteError
@@ -33,7 +34,13 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 def _convert(
-    bags: Path, names: list[str], out: Path, *, append: bool, contract: Path = SAMPLE_CONTRACT
+    bags: Path,
+    names: list[str],
+    out: Path,
+    *,
+    append: bool,
+    contract: Path = SAMPLE_CONTRACT,
+    reports: list[DatasetReport] | None = None,
 ) -> int:
     manifest = bags / f"manifest-{'-'.join(names)}.yaml"
     manifest.write_text("bags:\n" + "".join(f"  - uri: {n}\n" for n in names))
@@ -45,7 +52,9 @@ def _convert(
     if not plan.requests:
         return 0
     staged = [convert_episode(r).dir_uri for r in plan.requests]
-    reduce_run(plan, staged)
+    report = reduce_run(plan, staged)
+    if reports is not None:
+        reports.append(report)
     return len(plan.requests)
 
 
@@ -60,9 +69,10 @@ def _files(root: Path) -> dict[str, tuple[int, int, bytes]]:
 
 def test_append_adds_new_files_and_keeps_old_ones_byte_identical(bags: Path, tmp_path: Path) -> None:
     out = tmp_path / "ds"
-    assert _convert(bags, ["a", "b"], out, append=True) == 2  # append creates a missing dataset
+    reports: list[DatasetReport] = []
+    assert _convert(bags, ["a", "b"], out, append=True, reports=reports) == 2  # creates a missing dataset
     before = _files(out)
-    assert _convert(bags, ["a", "b", "c"], out, append=True) == 1  # only the new bag is converted
+    assert _convert(bags, ["a", "b", "c"], out, append=True, reports=reports) == 1  # only the new bag
     after = _files(out)
     assert {k: after[k] for k in before} == before  # same inode, mtime and bytes
     assert sorted(set(after) - set(before)) == [
@@ -78,6 +88,8 @@ def test_append_adds_new_files_and_keeps_old_ones_byte_identical(bags: Path, tmp
     qa = json.loads((out / "meta/qa/summary.json").read_text())
     assert [e["episode_index"] for e in qa["episodes"]] == [0, 1, 2]
     assert qa["reports"] == ["report.html", "report-001.html"]
+    # each run's report names its own HTML QA report (the CLI and the summary artifact print it)
+    assert [r.qa_report for r in reports] == ["meta/qa/report.html", "meta/qa/report-001.html"]
     report = validate_dataset(out, repo_id="test/append")
     assert report.episodes == 3
     assert report.frames_decoded == info["total_frames"]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import pytest
+import yaml
 
 from bagport.errors import ContractError
 from bagport.qa import QAConfig, load_qa_config
@@ -10,7 +11,15 @@ from tests.helpers import REPO
 
 
 def test_configs_qa_yaml_spells_out_the_defaults() -> None:
-    assert load_qa_config((REPO / "configs" / "qa.yaml").read_text()) == QAConfig()
+    text = (REPO / "configs" / "qa.yaml").read_text()
+    assert load_qa_config(text) == QAConfig()
+    # every option is written out, not only equal by falling back to a default
+    written = yaml.safe_load(text)
+    for group, options in QAConfig().model_dump().items():
+        if isinstance(options, dict):
+            assert sorted(written[group]) == sorted(options), group
+        else:
+            assert group in written
 
 
 def test_unknown_key_names_the_line_and_the_nearest_key() -> None:

@@ -116,7 +116,6 @@ def score_manifest(
             default_task=bag.task,
             metadata=bag.metadata,
             qa=qa.model_dump(mode="json"),
-            **bag.window,
             msg_definitions=dict(msg_definitions or {}),
             **bag.window,
         )

@@ -18,12 +18,15 @@ def vector_column(table: pa.Table, name: str) -> npt.NDArray[np.float64]:
 
 
 def column_matrix(column: pa.Array[Any] | pa.ChunkedArray[Any]) -> npt.NDArray[np.float64]:
-    """A list column as a (rows, dims) float64 array, a scalar column as (rows, 1)."""
+    """A list column as a (rows, dims) float64 array, a scalar column as (rows, 1).
+
+    Copies where Arrow cannot hand out a view (bool columns are bit-packed).
+    """
     rows = len(column)
     if pa.types.is_fixed_size_list(column.type) or pa.types.is_list(column.type):
-        flat = np.asarray(pc.list_flatten(column).to_numpy(), dtype=np.float64)
+        flat = np.asarray(pc.list_flatten(column).to_numpy(zero_copy_only=False), dtype=np.float64)
         width = (
             column.type.list_size if pa.types.is_fixed_size_list(column.type) else flat.size // max(rows, 1)
         )
         return flat.reshape(rows, width)
-    return np.asarray(column.to_numpy(), dtype=np.float64).reshape(rows, 1)
+    return np.asarray(column.to_numpy(zero_copy_only=False), dtype=np.float64).reshape(rows, 1)

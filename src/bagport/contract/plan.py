@@ -75,6 +75,11 @@ class SourceSpec:
     parent_frame: str | None = None
 
     @property
+    def msg_type(self) -> str:
+        """:attr:`msgtype` under the name Rosetta's decoder spec uses, so its decoders run unchanged."""
+        return self.msgtype
+
+    @property
     def stream(self) -> str:
         """What the timeline tracks: the topic, or ``topic#child_frame`` for a TF lookup."""
         return self.topic if self.child_frame is None else f"{self.topic}#{self.child_frame}"

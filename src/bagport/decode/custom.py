@@ -2,7 +2,7 @@
 
 A decoder is ``(msg, spec) -> array-like``: ``msg`` is the deserialised message (a rosbags
 dataclass with the ROS field names), ``spec`` the contract entry (:class:`bagport.contract.SourceSpec`:
-``names``, ``msgtype``, ``topic``, ``key``).  It returns the entry's values as a 1-D sequence of
+``names``, ``msgtype`` (also as Rosetta's ``msg_type``), ``topic``, ``key``).  It returns the entry's values as a 1-D sequence of
 numbers.
 
 Registered decoders (``@register_decoder("acme_msgs/msg/Gripper")``) serve every contract entry of
@@ -31,7 +31,7 @@ __all__ = [
 ]
 
 CustomDecoder = Callable[[Any, Any], Any]
-"""``(msg, spec) -> np.ndarray``; ``spec`` has ``names``, ``msgtype``, ``topic``, ``key``."""
+"""``(msg, spec) -> np.ndarray``; ``spec`` has ``names``, ``msgtype`` (= ``msg_type``), ``topic``, ``key``."""
 
 ENTRY_POINT_GROUP = "bagport.decoders"
 _REGISTRY: dict[str, CustomDecoder] = {}

@@ -13,13 +13,23 @@ import numpy.typing as npt
 
 from bagport.align.grid import NS_PER_S
 
-__all__ = ["STRATEGIES", "Selection", "hold_fill", "select_for_ticks", "select_hold"]
+__all__ = [
+    "GAP_FACTOR",
+    "STRATEGIES",
+    "Selection",
+    "hold_fill",
+    "interpolation_span_ns",
+    "select_for_ticks",
+    "select_hold",
+]
 
 Int64Array = npt.NDArray[np.int64]
 FloatArray = npt.NDArray[np.float64]
 BoolArray = npt.NDArray[np.bool_]
 
 STRATEGIES = ("hold", "asof", "drop", "nearest", "interpolate")
+GAP_FACTOR = 5
+"""``interpolate`` without ``tol_ms``: a silence this many median message intervals long is a dropout."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -78,14 +88,28 @@ def _nearest(stamps_ns: Int64Array, ticks_ns: Int64Array, tol_ns: int) -> Int64A
     return np.where(gap <= tol_ns, chosen, -1).astype(np.int64)
 
 
-def _interpolate(stamps_ns: Int64Array, ticks_ns: Int64Array) -> Selection:
+def interpolation_span_ns(stamps_ns: Int64Array, fps: int, tol_ms: float | None) -> int:
+    """The longest silence ``interpolate`` bridges: ``tol_ms``, else the larger of
+    :data:`GAP_FACTOR` times the stream's median message interval and two frame periods.
+
+    A tick inside a longer silence is a dropout, not a trend: it is missing and ``fill`` decides.
+    """
+    if tol_ms is not None:
+        return round(tol_ms * 1_000_000)
+    steps = np.diff(np.unique(stamps_ns))
+    typical_ns = int(np.median(steps)) if steps.size else 0
+    return max(GAP_FACTOR * typical_ns, 2 * NS_PER_S // fps)
+
+
+def _interpolate(stamps_ns: Int64Array, ticks_ns: Int64Array, max_span_ns: int) -> Selection:
     lo = select_hold(stamps_ns, ticks_ns)
     hi = _select_next(stamps_ns, ticks_ns)
-    inside = (lo >= 0) & (hi >= 0)
-    s_lo = stamps_ns[np.maximum(lo, 0)].astype(np.float64)
-    s_hi = stamps_ns[np.maximum(hi, 0)].astype(np.float64)
+    s_lo = stamps_ns[np.maximum(lo, 0)]
+    s_hi = stamps_ns[np.maximum(hi, 0)]
     span = s_hi - s_lo
-    weight = np.where(inside & (span > 0), (ticks_ns - s_lo) / np.where(span > 0, span, 1.0), 0.0)
+    inside = (lo >= 0) & (hi >= 0) & (span <= max_span_ns)
+    share = (ticks_ns - s_lo).astype(np.float64) / np.where(span > 0, span, 1).astype(np.float64)
+    weight = np.where(inside & (span > 0), share, 0.0)
     return Selection(np.where(inside, lo, -1), np.where(inside, hi, -1), weight)
 
 
@@ -98,10 +122,11 @@ def select_for_ticks(
     - ``asof``: latest at or before the tick if it is at most ``tol_ms`` old.
     - ``drop``: latest at or before the tick if it arrived in the frame window ``(tick - 1/fps, tick]``.
     - ``nearest``: the closest message within ``tol_ms``, before or after (looks ahead: opt-in).
-    - ``interpolate``: linear between the messages around the tick (looks ahead: opt-in).
+    - ``interpolate``: linear between the messages around the tick if they are at most
+      :func:`interpolation_span_ns` apart (looks ahead: opt-in).
     """
     if strategy == "interpolate":
-        return _interpolate(stamps_ns, ticks_ns)
+        return _interpolate(stamps_ns, ticks_ns, interpolation_span_ns(stamps_ns, fps, tol_ms))
     if strategy == "nearest":
         if tol_ms is None:
             raise ValueError("nearest needs tol_ms")
@@ -122,19 +147,16 @@ def select_for_ticks(
     return Selection(np.where(valid & (age <= max_age_ns), chosen, -1).astype(np.int64))
 
 
-def hold_fill(selection: Selection) -> tuple[Selection, BoolArray]:
-    """Fill missing ticks with the last valid selection (``fill: hold``); returns the filled mask.
+def hold_fill(selection: Selection, latest: Int64Array) -> tuple[Selection, BoolArray]:
+    """``fill: hold``: a missing tick takes ``latest`` (:func:`select_hold` of the same ticks: the
+    newest message at or before it, however old); returns the filled mask.
 
     Leading missing ticks stay missing: there is nothing earlier to hold.
     """
-    lo = selection.lo
-    valid_pos = np.where(lo >= 0, np.arange(lo.size), -1)
-    last_valid = np.maximum.accumulate(valid_pos) if lo.size else valid_pos
-    filled = (lo < 0) & (last_valid >= 0)
-    new_lo = np.where(last_valid >= 0, lo[np.maximum(last_valid, 0)], -1).astype(np.int64)
+    filled = (selection.lo < 0) & (latest >= 0)
+    new_lo = np.where(filled, latest, selection.lo).astype(np.int64)
     hi = weight = None
     if selection.hi is not None and selection.weight is not None:
-        hi = np.where(filled, new_lo, selection.hi[np.maximum(last_valid, 0)]).astype(np.int64)
-        hi = np.where(new_lo >= 0, hi, -1)
+        hi = np.where(filled, new_lo, selection.hi).astype(np.int64)
         weight = np.where(filled, 0.0, selection.weight)
     return Selection(new_lo, hi, weight), filled

@@ -18,8 +18,10 @@ from bagport.align import (
     grid_drift_ns,
     grid_ticks_ns,
     hold_fill,
+    interpolation_span_ns,
     reference_ticks_ns,
     select_for_ticks,
+    select_hold,
 )
 from bagport.contract import ContractPlan, SourceSpec
 from bagport.contract.model import StampSource
@@ -110,6 +112,14 @@ def _clock_ticks(
     return ticks, clock
 
 
+def _why_missing(src: SourceSpec, stamps: Int64Array, fps: int) -> str:
+    if src.strategy != "interpolate":
+        return ""
+    span_ms = interpolation_span_ns(stamps, fps, src.tol_ms) / 1e6
+    default = "" if src.tol_ms is not None else " (the default: 5 median message intervals or 2 frames)"
+    return f": the messages around them are more than {span_ms:g} ms apart{default}, a dropout"
+
+
 def _missing_error(
     src: SourceSpec, missing: BoolArray, ticks: Int64Array, uri: str, why: str
 ) -> AlignmentError:
@@ -119,7 +129,8 @@ def _missing_error(
         f"{src.strategy!r}{why} (first at t_ns={first}, {(first - ticks[0]) / 1e9:.3f} s into the episode)",
         uri=uri,
         topic=src.topic,
-        fix="raise align.tol_ms, use 'strategy: hold', or choose align.fill (hold, zeros, drop_frame); "
+        fix="raise align.tol_ms (for interpolate: the longest silence bridged), use 'strategy: hold', "
+        "or choose align.fill (hold, zeros, drop_frame); "
         "bagport never fills missing values silently.",
     )
 
@@ -181,16 +192,15 @@ def align_sources(
     selections: list[tuple[Selection, BoolArray]] = []
     keep: BoolArray = np.ones(ticks.size, dtype=np.bool_)
     for src, topic, stamp in chosen:
-        sel = select_for_ticks(
-            topic.stamps(stamp), ticks + src.offset_ns, strategy=src.strategy, fps=plan.fps, tol_ms=src.tol_ms
-        )
+        stamps, targets = topic.stamps(stamp), ticks + src.offset_ns
+        sel = select_for_ticks(stamps, targets, strategy=src.strategy, fps=plan.fps, tol_ms=src.tol_ms)
         filled: BoolArray = np.zeros(ticks.size, dtype=np.bool_)
         missing = sel.missing
         if missing.any():
             if src.fill == "fail":
-                raise _missing_error(src, missing, ticks, uri, "")
+                raise _missing_error(src, missing, ticks, uri, _why_missing(src, stamps, plan.fps))
             if src.fill == "hold":
-                sel, filled = hold_fill(sel)
+                sel, filled = hold_fill(sel, select_hold(stamps, targets))
                 if sel.missing.any():
                     raise _missing_error(src, sel.missing, ticks, uri, " and nothing earlier to hold")
             elif src.fill == "zeros":

@@ -13,6 +13,7 @@ from bagport.align import (
     grid_drift_ns,
     grid_ticks_ns,
     hold_fill,
+    interpolation_span_ns,
     reference_ticks_ns,
     select_for_ticks,
     select_hold,
@@ -95,10 +96,41 @@ def test_interpolation_is_exact_on_linear_signals(
     np.testing.assert_allclose(got[inside], (slope * tick_arr + offset)[inside], atol=1e-6)
 
 
+@given(
+    stamps=st.lists(st.integers(0, 10**9), min_size=2, max_size=40, unique=True),
+    ticks=st.lists(st.integers(0, 10**9), min_size=1, max_size=30),
+    tol_ms=st.one_of(st.none(), st.floats(1, 500)),
+)
+def test_interpolation_never_bridges_a_silence_longer_than_its_span(
+    stamps: list[int], ticks: list[int], tol_ms: float | None
+) -> None:
+    stamp_arr = np.array(stamps, dtype=np.int64)
+    tick_arr = np.array(ticks, dtype=np.int64)
+    span_ns = interpolation_span_ns(stamp_arr, 30, tol_ms)
+    sel = select_for_ticks(stamp_arr, tick_arr, strategy="interpolate", fps=30, tol_ms=tol_ms)
+    assert sel.hi is not None
+    ordered = np.sort(stamp_arr)
+    for tick, lo, hi in zip(ticks, sel.lo.tolist(), sel.hi.tolist(), strict=True):
+        before, after = ordered[ordered <= tick], ordered[ordered >= tick]
+        bridged = before.size > 0 and after.size > 0 and after.min() - before.max() <= span_ns
+        assert (lo >= 0) == bridged
+        if bridged:
+            assert stamps[lo] == before.max() and stamps[hi] == after.min()
+
+
+def test_interpolation_span_defaults_to_five_intervals_or_two_frames() -> None:
+    at_500hz = np.arange(0, NS_PER_S, 2_000_000, dtype=np.int64)
+    assert interpolation_span_ns(at_500hz, 30, None) == 2 * NS_PER_S // 30  # 10 ms < two frames
+    at_10hz = np.arange(0, 10 * NS_PER_S, 100_000_000, dtype=np.int64)
+    assert interpolation_span_ns(at_10hz, 30, None) == 500_000_000
+    assert interpolation_span_ns(at_10hz, 30, 150) == 150_000_000
+
+
 def test_hold_fill_carries_the_last_value_forward_but_not_backward() -> None:
     sel = Selection(np.array([-1, 0, -1, -1, 1, -1], dtype=np.int64))
-    filled_sel, filled = hold_fill(sel)
-    assert filled_sel.lo.tolist() == [-1, 0, 0, 0, 1, 1]
+    latest = np.array([-1, 0, 0, 2, 1, 3], dtype=np.int64)  # select_hold: messages 2, 3 came late
+    filled_sel, filled = hold_fill(sel, latest)
+    assert filled_sel.lo.tolist() == [-1, 0, 0, 2, 1, 3]
     assert filled.tolist() == [False, False, True, True, False, True]
 
 

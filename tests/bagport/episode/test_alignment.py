@@ -5,13 +5,16 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pyarrow.parquet as pq
 import pytest
 
 from bagport.columns import vector_column
 from bagport.episode import convert_episode
+from bagport.errors import AlignmentError
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, write_episode_bag
+from bagport.synth.faults import Window
 from bagport.video import iter_frames
 from tests.helpers import episode_request
 
@@ -22,7 +25,7 @@ def _convert(bag: Path, staging: Path, text: str) -> EpisodeSummary:
     return convert_episode(episode_request(bag, staging, text, task="t"))
 
 
-def _state_contract(strategy: str) -> str:
+def _state_contract(align: str) -> str:
     return f"""\
 robot_type: r
 fps: 30
@@ -31,7 +34,7 @@ observations:
     topic: /joint_states
     type: sensor_msgs/msg/JointState
     selector: {{names: [j1, j2, j3, j4, j5, j6]}}
-    align: {{strategy: {strategy}}}
+    align: {{{align}}}
 actions:
   - key: action
     publish: {{topic: /cmd, type: sensor_msgs/msg/JointState}}
@@ -39,24 +42,75 @@ actions:
 """
 
 
-def test_interpolation_beats_hold_against_the_analytic_truth(tmp_path: Path) -> None:
-    spec = EpisodeSpec(duration_s=2.0, joint_rate_hz=100, cameras=(), task=None, seed=4)
+def _state(summary: EpisodeSummary) -> npt.NDArray[np.float64]:
+    return vector_column(pq.read_table(Path(summary.dir_uri) / "frames.parquet"), "observation.state")
+
+
+def _ticks(summary: EpisodeSummary) -> npt.NDArray[np.int64]:
+    return summary.first_tick_ns + (np.arange(summary.frames, dtype=np.int64) * NS) // 30
+
+
+@pytest.mark.parametrize("rate_hz", [100, 500, 1000], ids=lambda r: f"{r}Hz")
+def test_interpolation_beats_nearest_and_hold_against_the_analytic_truth(
+    tmp_path: Path, rate_hz: int
+) -> None:
+    spec = EpisodeSpec(duration_s=2.0, joint_rate_hz=rate_hz, cameras=(), task=None, seed=4)
     truth = write_episode_bag(tmp_path / "ep", "mcap", spec)
+    period_ms = 1000 / rate_hz
+    aligns = {
+        "hold": "strategy: hold",
+        "nearest": f"strategy: nearest, tol_ms: {period_ms}",
+        "interpolate": "strategy: interpolate",
+    }
     errors = {}
-    for strategy in ("hold", "interpolate"):
-        summary = _convert(tmp_path / "ep", tmp_path / strategy, _state_contract(strategy))
-        state = vector_column(pq.read_table(Path(summary.dir_uri) / "frames.parquet"), "observation.state")
-        ticks = summary.first_tick_ns + (np.arange(summary.frames) * NS) // 30
-        errors[strategy] = np.abs(state - truth.joint_position(ticks)).max()
+    for strategy, align in aligns.items():
+        summary = _convert(tmp_path / "ep", tmp_path / strategy, _state_contract(align))
+        errors[strategy] = np.abs(_state(summary) - truth.joint_position(_ticks(summary))).max()
         report = next(r for r in summary.alignment if r["key"] == "observation.state")
         assert report["strategy"] == strategy
+        assert report["filled_frames"] == 0
         if strategy == "interpolate":
             assert report["interpolated_frames"] > summary.frames // 2
-    # linear interpolation between samples h = 10 ms apart errs by at most max|q''| h^2 / 8
+    # linear interpolation between samples h apart errs by at most max|q''| h^2 / 8
     # (amplitude <= 1 rad, frequency <= 0.5 Hz), plus float32 storage
-    curvature_bound = (2 * np.pi * 0.5) ** 2 * 0.010**2 / 8
+    curvature_bound = (2 * np.pi * 0.5) ** 2 * (period_ms / 1000) ** 2 / 8
     assert errors["interpolate"] < curvature_bound + 1e-6
-    assert errors["interpolate"] < errors["hold"] / 20
+    assert errors["interpolate"] < errors["nearest"] / 20
+    assert errors["nearest"] < errors["hold"]
+
+
+def _paused_bag(tmp_path: Path) -> GroundTruth:
+    """500 Hz joints with the recorder paused from 0.8 s to 1.3 s."""
+    spec = EpisodeSpec(
+        duration_s=2.0, joint_rate_hz=500, cameras=(), task=None, seed=4, pauses=(Window(0.8, 0.5),)
+    )
+    return write_episode_bag(tmp_path / "ep", "mcap", spec)
+
+
+def test_interpolate_does_not_bridge_a_dropout(tmp_path: Path) -> None:
+    """A 0.5 s silence on a 500 Hz stream is a dropout, not a straight line: missing, and fill decides."""
+    truth = _paused_bag(tmp_path)
+    with pytest.raises(AlignmentError, match=r"observation.state.*more than 66.6+\d* ms apart.*a dropout"):
+        _convert(tmp_path / "ep", tmp_path / "fail", _state_contract("strategy: interpolate"))
+    held = _convert(tmp_path / "ep", tmp_path / "hold", _state_contract("strategy: interpolate, fill: hold"))
+    ticks = _ticks(held)
+    stamps = truth.joint_stamps_ns()
+    pause_ns = truth.spec.start_ns + np.array([0.8, 1.3]) * NS
+    last_before, first_after = stamps[stamps < pause_ns[0]].max(), stamps[stamps >= pause_ns[1]].min()
+    in_gap = (ticks > last_before) & (ticks < first_after)
+    report = next(r for r in held.alignment if r["key"] == "observation.state")
+    assert report["filled_frames"] == int(in_gap.sum()) > 10
+    state = _state(held)
+    # held: the last message before the pause, not a line drawn to the first message after it
+    np.testing.assert_allclose(
+        state[in_gap], np.broadcast_to(truth.joint_position(last_before), (int(in_gap.sum()), 6)), atol=1e-6
+    )
+    np.testing.assert_allclose(state[~in_gap], truth.joint_position(ticks[~in_gap]), atol=1e-4)
+    # an explicit tol_ms bridges it, and the report says how far off that is
+    bridged = _convert(
+        tmp_path / "ep", tmp_path / "tol", _state_contract("strategy: interpolate, tol_ms: 600")
+    )
+    assert next(r for r in bridged.alignment if r["key"] == "observation.state")["filled_frames"] == 0
 
 
 def _camera_contract(fill: str, extra: str = "") -> str:

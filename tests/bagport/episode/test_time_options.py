@@ -299,3 +299,44 @@ def test_disordered_stamps_are_counted_and_handled_deterministically(tmp_path: P
         if r["key"] == "observation.state"
     ]
     assert all(0 <= r["tick_ns"] - r["source_header_ns"] < 10_000_000 for r in prov)
+
+
+def _qa_values(summary: EpisodeSummary, subject: str) -> dict[str, Any]:
+    qa = json.loads((Path(summary.dir_uri) / QA_FILE).read_text())
+    return {c["check"]: c for c in qa["checks"] if c["subject"] == subject}
+
+
+def test_header_stamps_ahead_of_receive_time_are_tolerated_and_reported(tmp_path: Path) -> None:
+    """Another machine's clock 200 ms ahead, not corrected: no reset, no zero-fill; the offset is in QA."""
+    spec = EpisodeSpec(
+        duration_s=2.0, cameras=(), task=None, seed=5, faults=Faults(joint_header_ahead_ns=200_000_000)
+    )
+    truth = write_episode_bag(tmp_path / "ep", "mcap", spec)
+    summary = _convert(tmp_path / "ep", tmp_path / "s", _contract())
+    ticks = _ticks(summary, "observation.state")
+    state = _vectors(summary, "observation.state")
+    # every frame holds the sample whose (shifted) header stamp is the tick: captured 200 ms earlier
+    assert summary.frames == ticks.size >= 50
+    assert np.all(np.abs(state).sum(axis=1) > 0)
+    np.testing.assert_allclose(state, truth.joint_position(ticks - 200_000_000), atol=_bound(100))
+    report = next(r for r in summary.alignment if r["key"] == "observation.state")
+    assert report["filled_frames"] == 0 and report["stamp"] == "header"
+    offset = _qa_values(summary, "/joint_states")["time.clock_offset_ms"]
+    assert offset["value"] == pytest.approx(200 - 2, abs=0.5)  # 2 ms recorder latency
+    assert offset["verdict"] != "pass"
+
+
+def test_a_clock_jump_is_counted_and_converts_the_same_every_time(tmp_path: Path) -> None:
+    """Joint header stamps jump 2 s ahead mid-episode (QA's threshold: 1 s): a hard QA failure, and the
+    same frames on every conversion."""
+    spec = EpisodeSpec(duration_s=2.0, cameras=(), task=None, faults=Faults(joint_clock_jump_s=2.0))
+    write_episode_bag(tmp_path / "ep", "mcap", spec)
+    text = _contract().replace("{strategy: interpolate}", "{strategy: hold}")
+    first = _convert(tmp_path / "ep", tmp_path / "a", text)
+    again = _convert(tmp_path / "ep", tmp_path / "b", text)
+    assert pq.read_table(Path(first.dir_uri) / FRAMES_FILE).equals(
+        pq.read_table(Path(again.dir_uri) / FRAMES_FILE)
+    )
+    jumps = _qa_values(first, "/joint_states")["time.clock_jumps"]
+    assert (jumps["value"], jumps["verdict"]) == (1, "fail")
+    assert np.isfinite(_vectors(first, "observation.state")).all()

@@ -73,6 +73,13 @@ def _episode_table(
     return pa.table(columns)
 
 
+def _would_exceed(path: Path, frames_in_file: int, frames: int, file_size_in_mb: float) -> bool:
+    """LeRobot's rotation rule (``dataset_writer.py``): size on disk + frames x average frame size >= limit."""
+    size_mb = path.stat().st_size / _MB  # row groups are on disk once written; the footer comes at close
+    per_frame_mb = size_mb / frames_in_file if frames_in_file else 0.0
+    return size_mb + per_frame_mb * frames >= file_size_in_mb
+
+
 def write_data_files(
     root: Path,
     summaries: Sequence[EpisodeSummary],
@@ -87,20 +94,21 @@ def write_data_files(
 ) -> list[DataPlacement]:
     """Stream staged frame tables into rotated data files; returns one placement per episode.
 
-    ``start`` (chunk, file) and the first episode/global indices let an append continue a dataset.
+    A file rotates as LeRobot's writer rotates it: when its size on disk plus the episode's frames at
+    the file's average bytes per frame reaches ``file_size_in_mb``.  ``start`` (chunk, file) and the
+    first episode/global indices let an append continue a dataset.
     """
     placements: list[DataPlacement] = []
     chunk, file = start
     writer: pq.ParquetWriter | None = None
     schema: pa.Schema | None = None
-    written_bytes = 0
-    limit = file_size_in_mb * _MB
+    path = root
+    frames_in_file = 0
     metadata = {b"huggingface": hf_features_metadata(vectors)}
     try:
         for episode_index, summary in enumerate(summaries, start=first_episode_index):
             table = _episode_table(summary, episode_index, first_index, task_index, vectors)
-            size = table.nbytes
-            if writer is not None and written_bytes + size > limit:
+            if writer is not None and _would_exceed(path, frames_in_file, table.num_rows, file_size_in_mb):
                 writer.close()
                 writer = None
                 chunk, file = next_chunk_file(chunk, file, chunks_size)
@@ -109,9 +117,9 @@ def write_data_files(
                 path.parent.mkdir(parents=True, exist_ok=True)
                 schema = table.schema.with_metadata(metadata)
                 writer = pq.ParquetWriter(path, schema, compression="snappy")
-                written_bytes = 0
+                frames_in_file = 0
             writer.write_table(table.cast(schema), row_group_size=max(1, table.num_rows))
-            written_bytes += size
+            frames_in_file += table.num_rows
             placements.append(DataPlacement(chunk, file, first_index, first_index + table.num_rows))
             first_index += table.num_rows
     finally:

@@ -47,7 +47,8 @@ def write_video_files(
     chunks_size: int,
     start: tuple[int, int] = (0, 0),
 ) -> list[VideoPlacement]:
-    """Group clips into files of at most ``file_size_in_mb`` (at least one clip each) and remux.
+    """Group clips into files (at least one clip each) and remux; a file rotates as LeRobot's writer rotates
+    it, when its size plus the next clip's reaches ``file_size_in_mb``.
 
     ``start`` (chunk, file): where the first new file goes (after the last one, for an append).
     """
@@ -75,7 +76,7 @@ def write_video_files(
 
         for n, summary in enumerate(summaries):
             clip, size = _local_clip(summary.file(summary.videos[key]), scratch, f"{n:06d}.mp4")
-            if group and group_bytes + size > limit:
+            if group and group_bytes + size >= limit:  # LeRobot's test, on clip sizes
                 flush()
             group.append(clip)
             group_bytes += size

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pyarrow.parquet as pq
 import pytest
 
 from bagport.dataset import DatasetLimits, write_dataset
@@ -126,3 +127,19 @@ def test_invariant_checks_catch_broken_datasets(tmp_path: Path, staged: list[Epi
     (out / "videos/observation.images.wrist/chunk-000/file-000.mp4").unlink()
     with pytest.raises(ValidationError, match=r"file-000\.mp4: missing"):
         check_invariants(out)
+
+
+def test_data_files_rotate_by_size_on_disk_as_lerobot_does(
+    tmp_path: Path, staged: list[EpisodeSummary]
+) -> None:
+    """LeRobot's rule: rotate when the open file's size on disk (row groups so far; the footer comes at
+    close) + the episode's frames at the file's average frame size reaches the limit."""
+    write_dataset(staged, str(tmp_path / "one"), robot_type="r")
+    size_mb = (tmp_path / "one/data/chunk-000/file-000.parquet").stat().st_size / 2**20
+    limits = DatasetLimits(data_files_size_in_mb=0.6 * size_mb)
+    write_dataset(staged, str(tmp_path / "split"), robot_type="r", limits=limits)
+    files = sorted((tmp_path / "split/data").rglob("*.parquet"))
+    # episodes of 12, 15, 18, 21 and 24 frames: the first four fit under 60 % of the single file
+    # (whose footer, a third of it, is not on disk while the file is open), the fifth would not
+    assert [pq.read_metadata(f).num_row_groups for f in files] == [4, 1]
+    assert validate_dataset(tmp_path / "split", repo_id="test/rotate").frames == sum(s.frames for s in staged)

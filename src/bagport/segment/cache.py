@@ -33,9 +33,9 @@ _FORMAT = 1
 def segmentation_uri(
     request: EpisodeRequest, options: EpisodesOptions, stream_topics: tuple[str, ...], stamp: str
 ) -> str | None:
-    """Where the segmentation of the request's bag is kept; ``None`` without a stamp (the bag's files
-    could not be listed, so a change could not be seen: segment afresh)."""
-    if not stamp:
+    """Where the segmentation of the request's bag is kept; ``None`` without a staging store (``bagport
+    qa``) or a stamp (the bag's files could not be listed, so a change could not be seen: segment afresh)."""
+    if not stamp or not request.staging_uri:
         return None
     digest = hashlib.sha256()
     parts = (

@@ -99,3 +99,16 @@ def test_an_unreadable_entry_is_ignored_and_rewritten(
     assert again == first
     assert len(opened) == 2
     assert segment_request(_request(bag)).cached  # rewritten
+
+
+def test_without_a_staging_store_nothing_is_kept(
+    tmp_path: Path, opened: list[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    bag = tmp_path / "bag"
+    write_episode_bag(bag, "mcap", SPEC)
+    monkeypatch.chdir(tmp_path)
+    qa_request = replace(_request(bag), staging_uri="")  # as `bagport qa` asks
+    assert not segment_request(qa_request).cached
+    assert not segment_request(qa_request).cached
+    assert len(opened) == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bag"]  # no `segments/` in the working folder

@@ -26,7 +26,7 @@ from bagport.segment.windows import (
     windows_from_events,
 )
 
-__all__ = ["SegmentedBag", "segment_bag", "segment_request", "segments_bags"]
+__all__ = ["SegmentedBag", "kept_segmentation", "segment_bag", "segment_request", "segments_bags"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -103,17 +103,31 @@ def segment_request(request: EpisodeRequest) -> SegmentedBag:
     The windows are kept in the staging store (:mod:`bagport.segment.cache`): asked again for the same
     bag files, episodes options and definitions, this returns them without opening the bag.
     """
-    plan = parse_contract(request.contract_text, request.contract_name)
-    options = plan.contract.episodes
-    if options is None or not segments_bags(plan) or request.has_window:
+    splitting = _splitting(request)
+    if splitting is None:
         return SegmentedBag((request,))
-    stream_topics = tuple(dict.fromkeys(src.topic for src in plan.sources))
-    segmentation, cached = _cached_or_scanned(request, options, stream_topics)
+    segmentation, cached = _cached_or_scanned(request, *splitting)
     requests = tuple(
         request.for_window(k, w.start_ns, w.end_ns, w.label, w.note)
         for k, w in enumerate(segmentation.windows)
     )
     return SegmentedBag(requests, segmentation.ignored, cached)
+
+
+def kept_segmentation(request: EpisodeRequest) -> str | None:
+    """Where the staging store keeps the segmentation of the request's bag (``None``: it keeps none)."""
+    splitting = _splitting(request)
+    return None if splitting is None else segmentation_uri(request, *splitting, source_stamp(request.bag_uri))
+
+
+def _splitting(request: EpisodeRequest) -> tuple[EpisodesOptions, tuple[str, ...]] | None:
+    """The contract's episodes options and stream topics, or ``None`` when the request is not split
+    (the contract does not segment bags, or the manifest entry gives an explicit window)."""
+    plan = parse_contract(request.contract_text, request.contract_name)
+    options = plan.contract.episodes
+    if options is None or not segments_bags(plan) or request.has_window:
+        return None
+    return options, tuple(dict.fromkeys(src.topic for src in plan.sources))
 
 
 def _cached_or_scanned(

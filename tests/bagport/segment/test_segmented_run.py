@@ -254,3 +254,4 @@ def test_a_resumed_run_reads_only_the_bags_of_episodes_not_staged_yet(
     assert opens["bagport.episode.convert"] == 3  # the remaining episodes only
     reduce_run(plan, staged)
     assert validate_dataset(tmp_path / "ds", repo_id="test/resume").episodes == 4
+    assert not (tmp_path / "staging").exists()  # the kept segmentations go with the staged episodes

@@ -6,8 +6,9 @@
 
 The key covers everything the windows depend on: the bag URI and its files' stamp (the one staged
 episodes are checked against), the contract's ``episodes`` options and, for ``gap_s``, the streams it
-scans, a manifest window, the ``--msg-path`` definitions and the bagport version. An entry that cannot
-be read or parsed counts as missing (the bag is segmented again and the entry rewritten).
+scans, a manifest window (none today: a windowed entry is not split), the ``--msg-path`` definitions and
+the bagport version. An entry that cannot be read or parsed counts as missing (the bag is segmented
+again and the entry rewritten); a partly written entry does not parse (it is one JSON object).
 """
 
 from __future__ import annotations

@@ -34,7 +34,8 @@ def segment_bag_task(request: dict[str, Any], label: str) -> dict[str, Any] | St
         get_run_logger().error("%s: %s", label, err)
         return Failed(message=str(err))
     logger = get_run_logger()
-    logger.info("%s: %d episode(s)", label, len(found.requests))
+    cached = " (segmentation from the staging store, bag not read)" if found.cached else ""
+    logger.info("%s: %d episode(s)%s", label, len(found.requests), cached)
     for reason in found.ignored:
         logger.warning("%s: left out %s", label, reason)
     return {"requests": [r.to_dict() for r in found.requests], "ignored": list(found.ignored)}

@@ -28,7 +28,7 @@ from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
-from bagport.segment import EXCLUDED_LABELS, label_reason, segment_request, segments_bags
+from bagport.segment import EXCLUDED_LABELS, kept_segmentation, label_reason, segment_request, segments_bags
 from bagport.staging import QA_FILE, EpisodeSummary, read_summary
 from bagport.uris import is_local, read_text
 from bagport.video import EncoderSettings
@@ -267,17 +267,24 @@ def reduce_run(
         append=plan.config.append,
     )
     if not plan.config.keep_staging:
-        fs, path = url_to_fs(plan.config.resolved_staging())
-        for uri in staged_dirs:
-            _, episode_path = url_to_fs(uri)
-            if fs.exists(episode_path):
-                fs.rm(episode_path, recursive=True)
-        try:
-            if fs.exists(path) and not fs.find(path):
-                fs.rm(path, recursive=True)
-        except OSError:
-            pass
+        _remove_staged(plan, staged_dirs)
     return report
+
+
+def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:
+    """Remove this run's staged episodes and kept segmentations, then the staging store if it is empty
+    (another run may share it)."""
+    fs, path = url_to_fs(plan.config.resolved_staging())
+    kept_segmentations = (kept_segmentation(r) for r in plan.requests) if segments_bags(plan.contract) else ()
+    for uri in (*staged_dirs, *(u for u in kept_segmentations if u is not None)):
+        _, staged_path = url_to_fs(uri)
+        if fs.exists(staged_path):
+            fs.rm(staged_path, recursive=True)
+    try:
+        if fs.exists(path) and not fs.find(path):
+            fs.rm(path, recursive=True)
+    except OSError:
+        pass
 
 
 def summary_json(report: DatasetReport) -> str:

@@ -8,6 +8,7 @@
     stats.json            per-feature stats partials (+ pixel histograms for videos)
     videos/<key>.mp4      one clip per camera, pts = frame index
     episode.json          the summary; written last, so its presence marks completion
+<staging>/segments/<bag>-<key>.json   a bag's episode windows (``bagport.segment.cache``)
 ```
 """
 

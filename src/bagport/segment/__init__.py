@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from bagport.segment.check import check_episode_topics
 from bagport.segment.events import event_from_message, parse_event_text
-from bagport.segment.scan import SegmentedBag, segment_bag, segment_request, segments_bags
+from bagport.segment.scan import SegmentedBag, kept_segmentation, segment_bag, segment_request, segments_bags
 from bagport.segment.windows import (
     EXCLUDED_LABELS,
     EpisodeWindow,
@@ -30,6 +30,7 @@ __all__ = [
     "done_edges_ns",
     "drop_short",
     "event_from_message",
+    "kept_segmentation",
     "label_reason",
     "parse_event_text",
     "segment_bag",

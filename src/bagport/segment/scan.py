@@ -7,12 +7,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bagport.bags import BagReader, open_bag
+from bagport.bags import BagReader, open_bag, source_stamp
 from bagport.contract import ContractPlan, parse_contract
 from bagport.contract.model import EpisodesOptions
 from bagport.decode import field_at
 from bagport.episode.request import EpisodeRequest
 from bagport.errors import DecodeError
+from bagport.segment.cache import read_segmentation, segmentation_uri, write_segmentation
 from bagport.segment.events import event_from_message
 from bagport.segment.windows import (
     EpisodeWindow,
@@ -25,7 +26,7 @@ from bagport.segment.windows import (
     windows_from_events,
 )
 
-__all__ = ["SegmentedBag", "segment_bag", "segment_request", "segments_bags"]
+__all__ = ["SegmentedBag", "kept_segmentation", "segment_bag", "segment_request", "segments_bags"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -34,6 +35,8 @@ class SegmentedBag:
 
     requests: tuple[EpisodeRequest, ...]
     ignored: tuple[str, ...] = ()
+    cached: bool = False
+    """Whether the segmentation came from the staging store (the bag was not read)."""
 
     def none_found(self) -> str:
         """The error for a bag in which no episode was found."""
@@ -95,16 +98,49 @@ def segment_bag(reader: BagReader, options: EpisodesOptions, stream_topics: tupl
 
 def segment_request(request: EpisodeRequest) -> SegmentedBag:
     """One request per episode of the request's bag; the request itself when the contract does not
-    segment bags or the manifest entry gives an explicit window."""
-    plan = parse_contract(request.contract_text, request.contract_name)
-    options = plan.contract.episodes
-    if options is None or not segments_bags(plan) or request.has_window:
+    segment bags or the manifest entry gives an explicit window.
+
+    The windows are kept in the staging store (:mod:`bagport.segment.cache`): asked again for the same
+    bag files, episodes options and definitions, this returns them without opening the bag.
+    """
+    splitting = _splitting(request)
+    if splitting is None:
         return SegmentedBag((request,))
-    stream_topics = tuple(dict.fromkeys(src.topic for src in plan.sources))
-    with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as reader:
-        segmentation = segment_bag(reader, options, stream_topics)
+    segmentation, cached = _cached_or_scanned(request, *splitting)
     requests = tuple(
         request.for_window(k, w.start_ns, w.end_ns, w.label, w.note)
         for k, w in enumerate(segmentation.windows)
     )
-    return SegmentedBag(requests, segmentation.ignored)
+    return SegmentedBag(requests, segmentation.ignored, cached)
+
+
+def kept_segmentation(request: EpisodeRequest) -> str | None:
+    """Where the staging store keeps the segmentation of the request's bag (``None``: it keeps none)."""
+    splitting = _splitting(request)
+    return None if splitting is None else segmentation_uri(request, *splitting, source_stamp(request.bag_uri))
+
+
+def _splitting(request: EpisodeRequest) -> tuple[EpisodesOptions, tuple[str, ...]] | None:
+    """The contract's episodes options and stream topics, or ``None`` when the request is not split
+    (the contract does not segment bags, or the manifest entry gives an explicit window)."""
+    plan = parse_contract(request.contract_text, request.contract_name)
+    options = plan.contract.episodes
+    if options is None or not segments_bags(plan) or request.has_window:
+        return None
+    return options, tuple(dict.fromkeys(src.topic for src in plan.sources))
+
+
+def _cached_or_scanned(
+    request: EpisodeRequest, options: EpisodesOptions, stream_topics: tuple[str, ...]
+) -> tuple[Segmentation, bool]:
+    """The bag's segmentation from the staging store, else from a scan of the bag (then kept); whether
+    it was kept already."""
+    uri = segmentation_uri(request, options, stream_topics, source_stamp(request.bag_uri))
+    kept = read_segmentation(uri) if uri is not None else None
+    if kept is not None:
+        return kept, True
+    with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as reader:
+        segmentation = segment_bag(reader, options, stream_topics)
+    if uri is not None:
+        write_segmentation(uri, segmentation)
+    return segmentation, False

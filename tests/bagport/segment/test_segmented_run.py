@@ -4,13 +4,17 @@ and task; failed ones are left out (listed) unless kept; manifest windows and ga
 from __future__ import annotations
 
 import json
+from collections import Counter
+from contextlib import AbstractContextManager
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+from bagport.bags import BagReader, open_bag
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
@@ -203,3 +207,51 @@ def test_a_silence_longer_than_gap_s_splits_the_bag(tmp_path: Path) -> None:
     assert 4.0 <= first_second < 4.1
     assert [e["task_source"] for e in run["episodes"]] == ["contract", "contract"]
     assert np.all([e["segment"] is not None for e in run["episodes"]])
+
+
+def _count_opens(monkeypatch: pytest.MonkeyPatch, *modules: str) -> Counter[str]:
+    """How often each module opens a bag from now on."""
+    opens: Counter[str] = Counter()
+    for module in modules:
+
+        def counting(uri: str, _module: str = module, **options: Any) -> AbstractContextManager[BagReader]:
+            opens[_module] += 1
+            return open_bag(uri, **options)
+
+        monkeypatch.setattr(f"{module}.open_bag", counting)
+    return opens
+
+
+def test_a_resumed_run_reads_only_the_bags_of_episodes_not_staged_yet(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    demos = ((0.5, "START"), (2.0, "SUCCESS"), (2.5, "START"), (4.5, "SUCCESS"))
+    small = (
+        CameraSpec("front", "raw", "bgr8", height=16, width=16),
+        CameraSpec("wrist", "jpeg", height=16, width=16),
+    )
+    for i in range(2):
+        write_episode_bag(
+            tmp_path / f"bag{i}", "mcap", EpisodeSpec(duration_s=5.0, cameras=small, events=demos, seed=i)
+        )
+    (tmp_path / "manifest.yaml").write_text("bags:\n  - uri: bag0\n  - uri: bag1\n")
+    (tmp_path / "contract.yaml").write_text(SAMPLE_CONTRACT.read_text() + EPISODES)
+    config = ConvertConfig(
+        manifest=str(tmp_path / "manifest.yaml"),
+        contract=str(tmp_path / "contract.yaml"),
+        output=str(tmp_path / "ds"),
+        staging=str(tmp_path / "staging"),
+        encoder=FAST_CODEC,
+    )
+    requests, _ = segment_all(plan_run(config))
+    assert len(requests) == 4
+    convert_episode(requests[0])  # the run dies after its first episode
+    opens = _count_opens(monkeypatch, "bagport.segment.scan", "bagport.episode.convert")
+    plan = plan_run(config)  # the resume
+    assert segment_all(plan)[0] == requests
+    assert opens["bagport.segment.scan"] == 0  # no bag is read to split it again
+    staged = [convert_episode(r).dir_uri for r in requests]
+    assert opens["bagport.episode.convert"] == 3  # the remaining episodes only
+    reduce_run(plan, staged)
+    assert validate_dataset(tmp_path / "ds", repo_id="test/resume").episodes == 4
+    assert not (tmp_path / "staging").exists()  # the kept segmentations go with the staged episodes

@@ -11,8 +11,9 @@ from contextlib import contextmanager
 from moto.server import ThreadedMotoServer
 from s3fs import S3FileSystem
 
-__all__ = ["SECRET", "moto_s3"]
+__all__ = ["KEY_ID", "SECRET", "moto_s3"]
 
+KEY_ID = "AKIABAGPORTTESTKEY01"
 SECRET = "bagport-test-secret-key"
 
 
@@ -31,7 +32,7 @@ def moto_s3() -> Iterator[dict[str, str]]:
     # moto's backends live in the process, shared by every server it starts: begin with an empty store.
     urllib.request.urlopen(urllib.request.Request(f"http://127.0.0.1:{port}/moto-api/reset", method="POST"))
     env = {
-        "AWS_ACCESS_KEY_ID": "bagport-test",
+        "AWS_ACCESS_KEY_ID": KEY_ID,
         "AWS_SECRET_ACCESS_KEY": SECRET,
         "AWS_DEFAULT_REGION": "us-east-1",
         "AWS_ENDPOINT_URL": f"http://127.0.0.1:{port}",

@@ -22,6 +22,7 @@ from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.history import converted_bags
+from bagport.dataset.publish import recover_local_publish
 from bagport.dataset.remote import recover_remote_publish
 from bagport.dataset.write import recover_interrupted_append
 from bagport.episode import EpisodeRequest, episode_id_for
@@ -83,7 +84,9 @@ def plan_run(config: ConvertConfig) -> RunPlan:
         assert config.manifest is not None  # the config validates that one of the two is given
         manifest = load_manifest(config.manifest)
     fs, out_path = url_to_fs(config.output)
-    if not is_local(fs) and fs.exists(out_path):
+    if is_local(fs):
+        recover_local_publish(Path(out_path))  # a crashed publish: back to the previous dataset
+    elif fs.exists(out_path):
         recover_remote_publish(config.output)  # a crashed publish: back to the previous version (or nothing)
     done: set[tuple[str, str]] = set()
     if config.append and fs.exists(out_path):

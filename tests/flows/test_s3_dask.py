@@ -1,5 +1,6 @@
 """Fleet path: bags, staging and output on a real S3-compatible HTTP endpoint (moto's server on
-loopback) through s3fs, converted on a Dask cluster of worker processes, loaded by LeRobot."""
+loopback) through s3fs, converted on an existing Dask cluster of worker processes (``--dask-address``),
+loaded by LeRobot; the credentials appear in no output, log, dataset or staged object."""
 
 from __future__ import annotations
 
@@ -11,16 +12,26 @@ from pathlib import Path
 
 import pytest
 import s3fs
+from distributed import Client, LocalCluster, get_task_stream
 
+from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.synth import EpisodeSpec, write_episode_bag
+from flows.convert import _dask_runner
 from tests.helpers import REPO, SAMPLE_CONTRACT
-from tests.s3 import SECRET
+from tests.s3 import KEY_ID, SECRET
 
-pytestmark = pytest.mark.slow
+CREDENTIALS = (SECRET.encode(), KEY_ID.encode())
 
 
-def test_s3_bags_staging_and_output_on_dask(tmp_path: Path, s3_env: dict[str, str]) -> None:
+def _leaked(blob: bytes) -> list[bytes]:
+    return [c for c in CREDENTIALS if c in blob]
+
+
+@pytest.mark.slow
+def test_s3_bags_staging_and_output_on_an_existing_dask_cluster(
+    tmp_path: Path, s3_env: dict[str, str], capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
     fs = s3fs.S3FileSystem(endpoint_url=s3_env["AWS_ENDPOINT_URL"])
     fs.mkdir("fleet")
     write_episode_bag(tmp_path / "ep_mcap", "mcap", EpisodeSpec(duration_s=1.0, seed=1))
@@ -28,33 +39,81 @@ def test_s3_bags_staging_and_output_on_dask(tmp_path: Path, s3_env: dict[str, st
     fs.put(str(tmp_path / "ep_mcap"), "fleet/2026-11-20/ep_mcap", recursive=True)
     fs.put_file(str(tmp_path / "ep_ros1.bag"), "fleet/2026-11-20/ep_ros1.bag")
     fs.pipe("fleet/manifest.yaml", b"bags:\n  - uri: 2026-11-20/*\n")
-    env = {**os.environ, **s3_env, "BAGPORT_DEBUG": "0"}
-    proc = subprocess.run(
-        [
-            sys.executable, "-m", "flows.cli", "convert",
-            "--manifest", "s3://fleet/manifest.yaml",
-            "--contract", str(SAMPLE_CONTRACT),
-            "--output", "s3://fleet/datasets/sample",
-            "--staging", "s3://fleet/staging",
-            "--runner", "dask", "--workers", "2",
-        ],
-        capture_output=True, text=True, check=False, cwd=REPO, env=env,
-    )  # fmt: skip
+    # The workers inherit the AWS variables (as `dask worker` would from its host) and log at INFO
+    # to this process's stderr, where capfd reads them.
+    monkeypatch.setenv("PREFECT_LOGGING_LEVEL", "INFO")
+    with (
+        LocalCluster(  # type: ignore[no-untyped-call]
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+        ) as cluster,
+        Client(cluster) as client,  # type: ignore[no-untyped-call]
+    ):
+        workers = client.run(os.getpid)  # worker address -> pid
+        env = {**os.environ, **s3_env, "BAGPORT_DEBUG": "0"}
+        with get_task_stream(client) as stream:
+            proc = subprocess.run(
+                [
+                    sys.executable, "-m", "flows.cli", "convert",
+                    "--manifest", "s3://fleet/manifest.yaml",
+                    "--contract", str(SAMPLE_CONTRACT),
+                    "--output", "s3://fleet/datasets/sample",
+                    "--staging", "s3://fleet/staging",
+                    "--runner", "dask", "--dask-address", cluster.scheduler_address,
+                    "--keep-staging", "--verbose",
+                ],
+                capture_output=True, text=True, check=False, cwd=REPO, env=env,
+            )  # fmt: skip
+        worker_logs = json.dumps(client.get_worker_logs()).encode()
     assert proc.returncode == 0, proc.stderr[-3000:]
-    assert fs.exists("fleet/datasets/sample/meta/info.json")
-    assert not fs.exists("fleet/staging/episodes")  # staging cleaned after success
+    # Both episodes ran as tasks on the cluster's worker processes, not in the CLI's process.
+    ran = [t for t in stream.data if str(t["key"]).startswith("convert_episode_task-")]
+    assert len(ran) == 2
+    assert {t["worker"] for t in ran} <= set(workers)
+    assert os.getpid() not in workers.values()
     local = tmp_path / "downloaded"
     fs.get("fleet/datasets/sample", str(local), recursive=True)
     report = validate_dataset(local, repo_id="test/s3")
     assert report.episodes == 2
-    run = (local / "meta/provenance/run.json").read_text()
-    assert [e["bag_uri"] for e in json.loads(run)["episodes"]] == [
+    run = json.loads((local / "meta/provenance/run.json").read_text())
+    assert [e["bag_uri"] for e in run["episodes"]] == [
         "s3://fleet/2026-11-20/ep_mcap",
         "s3://fleet/2026-11-20/ep_ros1.bag",
     ]
-    assert SECRET not in run  # credentials are never written into provenance
-    access = {e["bag_uri"]: e["bag_read"]["access"] for e in json.loads(run)["episodes"]}
+    access = {e["bag_uri"]: e["bag_read"]["access"] for e in run["episodes"]}
     assert access == {
         "s3://fleet/2026-11-20/ep_mcap": "ranged",
         "s3://fleet/2026-11-20/ep_ros1.bag": "download",
     }
+    # Credentials are never logged nor written: not by the CLI, the workers, into the dataset
+    # (meta/, provenance, the QA report, data and videos) nor into the staged episodes.
+    workers_out = capfd.readouterr()
+    assert "frames staged at s3://fleet/staging" in workers_out.err  # the workers' INFO logs were captured
+    for name, text in {
+        "CLI stdout": proc.stdout,
+        "CLI stderr": proc.stderr,
+        "worker stdout": workers_out.out,
+        "worker stderr": workers_out.err,
+    }.items():
+        assert not _leaked(text.encode()), name
+    assert not _leaked(worker_logs)
+    objects = fs.find("fleet/datasets/sample") + fs.find("fleet/staging")
+    assert any(o.endswith("meta/provenance/run.json") for o in objects)
+    assert any("/meta/qa/" in o and o.endswith(".html") for o in objects)
+    assert sum(o.endswith("episode.json") for o in objects) == 2  # the kept staging store
+    assert {o: found for o in objects if (found := _leaked(fs.cat_file(o)))} == {}
+
+
+def test_dask_runner_starts_a_local_cluster_or_connects_to_an_address() -> None:
+    """The flow-started local cluster: the same runner with cluster settings (run end to end by the
+    benchmark's bagport-dask1/2 tools); with an address, the runner connects instead."""
+    local = _dask_runner(ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out"), workers=3)
+    assert local.address is None  # type: ignore[attr-defined]
+    assert local.cluster_kwargs == {  # type: ignore[attr-defined]
+        "n_workers": 3,
+        "threads_per_worker": 1,
+        "processes": True,
+        "dashboard_address": None,
+    }
+    config = ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out", dask_address="tcp://h:8786")
+    remote = _dask_runner(config, workers=3)
+    assert remote.address == "tcp://h:8786"  # type: ignore[attr-defined]

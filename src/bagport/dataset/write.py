@@ -19,6 +19,7 @@ from bagport.dataset.base import DatasetBase, read_base
 from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
+from bagport.dataset.publish import building_beside, recover_local_publish, swap_into_place
 from bagport.dataset.qa import write_qa
 from bagport.dataset.remote import append_remote, publish_remote, recover_remote_publish
 from bagport.dataset.videos import write_video_files
@@ -213,7 +214,8 @@ def write_dataset(
 
     Everything is built in a temporary folder beside ``output`` and renamed into
     place at the end, so a reader never sees a half-written dataset and a failure
-    leaves whatever was at ``output`` untouched. With ``append``, the episodes are
+    leaves whatever was at ``output`` untouched; what a killed run leaves beside a local
+    ``output`` is repaired first (:func:`bagport.dataset.publish.recover_local_publish`). With ``append``, the episodes are
     added to the dataset at ``output`` (created if missing) as new files. On an object
     store (no renames) the dataset is built locally and published under a journal that
     the next run rolls back after a crash (:mod:`bagport.dataset.remote`).
@@ -221,7 +223,9 @@ def write_dataset(
     limits = limits or DatasetLimits()
     fs, out_path = url_to_fs(output)
     local = is_local(fs)
-    if not local and fs.exists(out_path):
+    if local:
+        recover_local_publish(Path(out_path))  # a crashed publish: back to the previous dataset
+    elif fs.exists(out_path):
         recover_remote_publish(output)  # a crashed publish: back to the previous version (or nothing)
     if append and fs.exists(out_path):
         if not local:
@@ -241,24 +245,18 @@ def write_dataset(
         )
     if local:
         final = Path(out_path)
-        final.parent.mkdir(parents=True, exist_ok=True)
-        build_root = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex[:8]}"
+        with building_beside(final) as build_root:
+            report = _build(build_root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {})
+            swap_into_place(build_root, final)
     else:
         build_root = Path(tempfile.mkdtemp(prefix="bagport-dataset-")) / "dataset"
-    build_root.mkdir(parents=True)
-    try:
-        report = _build(build_root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {})
-        if local:
-            _swap_into_place(build_root, final)
-        else:
+        build_root.mkdir(parents=True)
+        try:
+            report = _build(build_root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {})
             files = sorted(p.relative_to(build_root).as_posix() for p in build_root.rglob("*") if p.is_file())
             stale = sorted({p[len(out_path.rstrip("/")) + 1 :] for p in fs.find(out_path)} - set(files))
             publish_remote(build_root, output, files, stale)
-    except BaseException:
-        shutil.rmtree(build_root, ignore_errors=True)
-        raise
-    finally:
-        if not local:
+        finally:
             shutil.rmtree(build_root.parent, ignore_errors=True)
     return DatasetReport(
         output,
@@ -291,33 +289,32 @@ def _append(
     recover_interrupted_append(final)
     base = read_base(final)
     limits = DatasetLimits.from_info(base.info)
-    build_root = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex[:8]}"
-    build_root.mkdir(parents=True)
     moved: list[Path] = []
-    try:
-        shutil.copytree(final / "meta", build_root / "meta")
-        report = _build(build_root, summaries, robot_type, limits, run_record, qa, qa_config, base)
-        for folder in ("data", "videos"):
-            for item in sorted((build_root / folder).rglob("*")) if (build_root / folder).exists() else []:
-                if item.is_file():
-                    target = final / item.relative_to(build_root)
-                    if target.exists():
-                        raise DatasetWriteError(
-                            f"{target} exists already; the dataset changed during the append"
-                        )
-                    target.parent.mkdir(parents=True, exist_ok=True)
-                    item.rename(target)
-                    moved.append(target)
-        retired = final / f".meta.old-{uuid.uuid4().hex[:8]}"
-        (final / "meta").rename(retired)
-        (build_root / "meta").rename(final / "meta")
-        shutil.rmtree(retired, ignore_errors=True)
-    except BaseException:
-        for target in moved:
-            target.unlink(missing_ok=True)
-        raise
-    finally:
-        shutil.rmtree(build_root, ignore_errors=True)
+    with building_beside(final) as build_root:
+        try:
+            shutil.copytree(final / "meta", build_root / "meta")
+            report = _build(build_root, summaries, robot_type, limits, run_record, qa, qa_config, base)
+            for folder in ("data", "videos"):
+                for item in (
+                    sorted((build_root / folder).rglob("*")) if (build_root / folder).exists() else []
+                ):
+                    if item.is_file():
+                        target = final / item.relative_to(build_root)
+                        if target.exists():
+                            raise DatasetWriteError(
+                                f"{target} exists already; the dataset changed during the append"
+                            )
+                        target.parent.mkdir(parents=True, exist_ok=True)
+                        item.rename(target)
+                        moved.append(target)
+            retired = final / f".meta.old-{uuid.uuid4().hex[:8]}"
+            (final / "meta").rename(retired)
+            (build_root / "meta").rename(final / "meta")
+            shutil.rmtree(retired, ignore_errors=True)
+        except BaseException:
+            for target in moved:
+                target.unlink(missing_ok=True)
+            raise
     size = sum(p.stat().st_size for p in final.rglob("*") if p.is_file())
     return replace(report, root=str(final), size_bytes=size)
 
@@ -331,17 +328,3 @@ def recover_interrupted_append(final: Path) -> None:
     retired = sorted(final.glob(".meta.old-*"))
     if retired:
         retired[-1].rename(final / "meta")
-
-
-def _swap_into_place(build_root: Path, final: Path) -> None:
-    if not final.exists():
-        build_root.rename(final)
-        return
-    retired = final.parent / f".{final.name}.old-{uuid.uuid4().hex[:8]}"
-    final.rename(retired)
-    try:
-        build_root.rename(final)
-    except OSError:
-        retired.rename(final)
-        raise
-    shutil.rmtree(retired, ignore_errors=True)

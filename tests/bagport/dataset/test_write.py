@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import fcntl
 import json
+import os
+import shutil
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -143,3 +146,95 @@ def test_data_files_rotate_by_size_on_disk_as_lerobot_does(
     # (whose footer, a third of it, is not on disk while the file is open), the fifth would not
     assert [pq.read_metadata(f).num_row_groups for f in files] == [4, 1]
     assert validate_dataset(tmp_path / "split", repo_id="test/rotate").frames == sum(s.frames for s in staged)
+
+
+@pytest.fixture(scope="module")
+def previous(tmp_path_factory: pytest.TempPathFactory, staged: list[EpisodeSummary]) -> Path:
+    """A published two-episode dataset, copied into each crash scene."""
+    root = tmp_path_factory.mktemp("previous") / "ds"
+    write_dataset(staged[:2], str(root), robot_type="r")
+    return root
+
+
+def _episodes(root: Path) -> int:
+    return int(json.loads((root / "meta/info.json").read_text())["total_episodes"])
+
+
+@pytest.mark.parametrize("new_build", [True, False], ids=["new-build-complete", "new-build-gone"])
+def test_a_crash_between_the_renames_rolls_back_to_the_previous_dataset(
+    tmp_path: Path, staged: list[EpisodeSummary], previous: Path, new_build: bool
+) -> None:
+    # Killed after `ds -> .ds.old-*` and before `.ds.tmp-* -> ds`: no dataset at ds.
+    shutil.copytree(previous, tmp_path / ".ds.old-0a1b2c3d")
+    if new_build:  # complete, but its run never finished: discarded, not swapped in
+        shutil.copytree(previous, tmp_path / ".ds.tmp-4e5f6a7b")
+        (tmp_path / ".ds.tmp-4e5f6a7b/NEW").touch()
+    out = tmp_path / "ds"
+    with pytest.raises(DatasetWriteError, match="already exists; nothing was written"):
+        write_dataset(staged[2:3], str(out), robot_type="r")  # the previous dataset is back at ds
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+    assert _episodes(out) == 2
+    assert not (out / "NEW").exists()
+    check_invariants(out)
+
+
+def test_an_append_after_a_crash_adds_to_the_restored_dataset(
+    tmp_path: Path, staged: list[EpisodeSummary], previous: Path
+) -> None:
+    shutil.copytree(previous, tmp_path / ".ds.old-0a1b2c3d")
+    out = tmp_path / "ds"
+    report = write_dataset(staged[2:3], str(out), robot_type="r", append=True)
+    assert report.episodes == _episodes(out) == 3  # not a new one-episode dataset
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+    check_invariants(out)
+
+
+def test_leftovers_of_crashed_runs_are_removed_and_nothing_else(
+    tmp_path: Path, staged: list[EpisodeSummary], previous: Path
+) -> None:
+    out = tmp_path / "ds"
+    shutil.copytree(previous, out)
+    (tmp_path / ".ds.old-0a1b2c3d/meta").mkdir(parents=True)  # its removal was killed half way
+    (tmp_path / ".ds.tmp-4e5f6a7b/data/chunk-000").mkdir(parents=True)  # SIGKILL mid-build
+    (tmp_path / ".ds.tmp-4e5f6a7b/data/chunk-000/file-000.parquet").write_bytes(b"partial")
+    (tmp_path / ".ds.tmp-8c9d0e1f").mkdir()  # SIGKILL right after the build folder was made
+    others = [".ds.tmp-notours", "ds.tmp-12345678", ".other.tmp-12345678", ".ds.tmp-12345678.bak"]
+    for name in others:
+        (tmp_path / name).mkdir()
+    write_dataset(staged[2:3], str(out), robot_type="r", overwrite=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(["ds", *others])
+    assert _episodes(out) == 1
+
+
+def test_a_build_folder_in_use_is_left_to_its_run(tmp_path: Path, staged: list[EpisodeSummary]) -> None:
+    live = tmp_path / ".ds.tmp-0a1b2c3d"
+    live.mkdir()
+    fd = os.open(live, os.O_RDONLY)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)  # as a run writing ds holds it
+        with pytest.raises(
+            DatasetWriteError, match=r"another bagport run is writing .*ds \(its build folder"
+        ):
+            write_dataset(staged[:1], str(tmp_path / "ds"), robot_type="r")
+    finally:
+        os.close(fd)
+    assert sorted(p.name for p in tmp_path.iterdir()) == [live.name]
+
+
+def test_a_failure_mid_build_keeps_the_previous_dataset_loadable(
+    tmp_path: Path, staged: list[EpisodeSummary], previous: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "ds"
+    shutil.copytree(previous, out)
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def encoder_dies(root: Path, *args: object, **kwargs: object) -> None:
+        assert list(root.glob("data/chunk-*/file-*.parquet"))  # the data files are written already
+        raise RuntimeError("encoder died")
+
+    monkeypatch.setattr("bagport.dataset.write.write_video_files", encoder_dies)
+    with pytest.raises(RuntimeError, match="encoder died"):
+        write_dataset(staged, str(out), robot_type="r", overwrite=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]  # no build folder left behind
+    assert {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert validate_dataset(out, repo_id="test/kept", decode_every=10).episodes == 2

@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pyarrow.parquet as pq
 import pytest
+import yaml
 
 from bagport.bags import open_bag
 from bagport.columns import vector_column
@@ -16,19 +19,30 @@ from bagport.config import ConvertConfig
 from bagport.contract import load_contract, parse_contract
 from bagport.contract.draft import draft_contract
 from bagport.dataset.validate import validate_dataset
+from bagport.decode.defaults import DEFAULT_FIELDS
+from bagport.decode.paths import resolve_path
 from bagport.episode import convert_episode
-from bagport.errors import ContractError
+from bagport.errors import AlignmentError, ContractError, QualityError
 from bagport.feature_table import describe_features
 from bagport.run import plan_run, reduce_run
+from bagport.video.settings import default_encoder
 from tests.helpers import REPO, realbag
 
 
-def _convert(manifest: Path, contract: Path, out: Path, *, keep_qa_failures: bool = False) -> None:
+def _convert(
+    manifest: Path,
+    contract: Path,
+    out: Path,
+    *,
+    keep_qa_failures: bool = False,
+    encoder: dict[str, Any] | None = None,
+) -> None:
     config = ConvertConfig(
         manifest=str(manifest),
         contract=str(contract),
         output=str(out),
         on_qa_fail="keep" if keep_qa_failures else None,
+        encoder=default_encoder() if encoder is None else encoder,
     )
     plan = plan_run(config)
     staged = [convert_episode(request).dir_uri for request in plan.requests]
@@ -219,3 +233,129 @@ def test_ros1_tf_lookup_matches_the_pose_it_was_broadcast_from(tmp_path: Path) -
     # turtle_tf broadcasts world -> turtle1 from each pose, in the same instant: the two streams agree
     np.testing.assert_allclose(tf, pose, atol=1e-5)
     assert np.ptp(tf[:, 0]) > 1.0  # the turtle moves: not a constant
+
+
+RERUN = "rerun_humble_sensors/rosbag2_2025_09_10-13_03_56_0.mcap"
+ARRAYS = "rosbag2parquet/array_msgs"
+ARCHIVAL = yaml.safe_load((REPO / "configs/codecs/archival.yaml").read_text())
+"""Near-lossless (H.264 yuv444p crf 0): decoded RGB is within 2 levels of what was encoded."""
+
+
+def _only_message(bag: Path, topic: str) -> Any:
+    with open_bag(str(bag)) as reader:
+        (message,) = list(reader.messages([topic]))
+        return message.msg()
+
+
+def _one_topic_contract(tmp_path: Path, key: str, topic: str, msgtype: str) -> Path:
+    contract = tmp_path / "c.yaml"
+    contract.write_text(
+        f"robot_type: one_shot\nfps: 10\nobservations:\n  - {{key: {key}, topic: {topic}, type: {msgtype}}}\n"
+    )
+    return contract
+
+
+def _manifest(tmp_path: Path, bag: Path) -> Path:
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {bag}\n    task: look\n")
+    return manifest
+
+
+@pytest.mark.parametrize(
+    ("topic", "msgtype"),
+    [("/image", "sensor_msgs/msg/Image"), ("/compressed_image", "sensor_msgs/msg/CompressedImage")],
+    ids=["rgb8", "jpeg"],
+)
+def test_humble_single_camera_image_is_a_one_frame_video_of_its_pixels(
+    tmp_path: Path, topic: str, msgtype: str
+) -> None:
+    """The bag's one Image (rgb8 640x480) and one CompressedImage (JPEG) each become the one frame of a
+    dataset whose decoded pixels are the message's, in RGB order. One message spans 0 s: QA fails the
+    episode by default (see test_one_message_episode_fails_qa_unless_kept), so it is kept here."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+    from PIL import Image  # noqa: PLC0415
+
+    bag = realbag(RERUN)
+    msg = _only_message(bag, topic)
+    if msgtype.endswith("/Image"):
+        assert (msg.encoding, msg.width, msg.height, msg.step) == ("rgb8", 640, 480, 640 * 3)
+        source: npt.NDArray[np.uint8] = np.frombuffer(bytes(msg.data), dtype=np.uint8).reshape(480, 640, 3)
+    else:  # decoded by PIL, not by bagport's own JPEG decoder (simplejpeg)
+        assert msg.format == "jpeg"
+        source = np.asarray(Image.open(io.BytesIO(bytes(msg.data))).convert("RGB"))
+    out = tmp_path / "camera"
+    contract = _one_topic_contract(tmp_path, "observation.images.cam", topic, msgtype)
+    _convert(_manifest(tmp_path, bag), contract, out, keep_qa_failures=True, encoder=ARCHIVAL)
+    dataset = LeRobotDataset("test/camera", root=out)
+    assert dataset.meta.total_frames == 1
+    assert tuple(dataset.meta.features["observation.images.cam"]["shape"]) == (480, 640, 3)
+    frame = np.rint(dataset[0]["observation.images.cam"].numpy().transpose(1, 2, 0) * 255)
+    error = np.abs(frame - source)
+    assert error.max() <= 2  # the archival preset's RGB -> YUV -> RGB rounding
+    # both images are uniform noise: every channel's mean is 127.5 +- 0.3, so the means alone barely
+    # tell RGB from BGR; the pixels do: against the source with R and B swapped the frame is off by
+    # 57 (rgb8) and 18 (jpeg) levels on average, against the source by 0.4
+    assert np.abs(frame - source[..., ::-1]).mean() > 10
+    np.testing.assert_allclose(frame.reshape(-1, 3).mean(0), source.reshape(-1, 3).mean(0), atol=0.1)
+
+
+@pytest.mark.parametrize(
+    ("topic", "msgtype", "names"),
+    [
+        ("/one_shot/joint_state", "sensor_msgs/msg/JointState", [f"position.joint{i}" for i in (1, 2, 3)]),
+        ("/one_shot/imu", "sensor_msgs/msg/Imu", [*DEFAULT_FIELDS["sensor_msgs/msg/Imu"]]),
+    ],
+    ids=["joint_state", "imu"],
+)
+def test_one_message_stream_is_a_one_frame_dataset_when_kept(
+    tmp_path: Path, topic: str, msgtype: str, names: list[str]
+) -> None:
+    """rosbag2parquet's array_msgs: one JointState (joint1..3) and one Imu; each alone is one frame."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+
+    bag = realbag(ARRAYS)
+    msg = _only_message(bag, topic)
+    if msgtype.endswith("/JointState"):
+        assert list(msg.name) == ["joint1", "joint2", "joint3"]
+        expected = [float(v) for v in msg.position]
+    else:
+        expected = [float(resolve_path(msg, name, topic)) for name in names]
+    out = tmp_path / "one"
+    contract = _one_topic_contract(tmp_path, "observation.state", topic, msgtype)
+    _convert(_manifest(tmp_path, bag), contract, out, keep_qa_failures=True)
+    dataset = LeRobotDataset("test/one", root=out)
+    assert dataset.meta.total_frames == 1
+    assert dataset.meta.features["observation.state"]["names"] == names
+    np.testing.assert_allclose(dataset[0]["observation.state"].numpy(), expected, rtol=1e-6)
+    verdict = json.loads((out / "meta/qa/summary.json").read_text())["episodes"][0]["verdict"]
+    assert verdict == "fail"  # kept, and flagged
+
+
+def test_one_message_episode_fails_qa_unless_kept(tmp_path: Path) -> None:
+    bag = realbag(ARRAYS)
+    contract = _one_topic_contract(
+        tmp_path, "observation.state", "/one_shot/joint_state", "sensor_msgs/msg/JointState"
+    )
+    with pytest.raises(
+        QualityError,
+        match=r"(?s)no episode is left to write.*episode lasts 0\.00 s.*1 message\(s\) inside the episode window"
+        r".*--on-qa-fail keep",
+    ):
+        _convert(_manifest(tmp_path, bag), contract, tmp_path / "out")
+
+
+def test_one_shot_joint_state_and_imu_never_overlap(tmp_path: Path) -> None:
+    """array_msgs logs its Imu 1.3 s before its JointState, one message each: no frame holds both."""
+    bag = realbag(ARRAYS)
+    contract = tmp_path / "c.yaml"
+    contract.write_text(
+        "robot_type: one_shot\nfps: 10\nobservations:\n"
+        "  - {key: observation.state, topic: /one_shot/joint_state, type: sensor_msgs/msg/JointState}\n"
+        "  - {key: observation.imu, topic: /one_shot/imu, type: sensor_msgs/msg/Imu}\n"
+    )
+    with pytest.raises(
+        AlignmentError,
+        match=r"array_msgs: the streams never overlap in time \(/one_shot/joint_state starts after "
+        r"/one_shot/imu ends\).*Fix: check the topics, the stamp source",
+    ):
+        _convert(_manifest(tmp_path, bag), contract, tmp_path / "out")

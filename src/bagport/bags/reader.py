@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import shutil
+import struct
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
@@ -20,6 +21,7 @@ from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags.detect import detect_storage
+from bagport.bags.indexcount import window_counts
 from bagport.bags.layout import BagPath, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.publish import Int64Array, mcap_publish_times_ns
@@ -227,16 +229,34 @@ class RosbagsReader:
                 uri=self._uri,
                 fix="the bag is corrupt or truncated.",
             ) from err
-        if start_ns is None and stop_ns is None:  # a window reads part of each topic
-            self._check_counts(yielded)
+        window = "" if start_ns is None and stop_ns is None else f" in [{start_ns}, {stop_ns}) ns"
+        self._check_counts(yielded, self._promised_in(conns, start_ns, stop_ns), window)
 
-    def _check_counts(self, yielded: dict[str, int]) -> None:
+    def _promised_in(self, conns: list[Any], start_ns: int | None, stop_ns: int | None) -> dict[str, int]:
+        """Messages per topic the bag promises in ``[start_ns, stop_ns)``: the metadata's (or index's)
+        totals when the window holds the whole bag, else what the data files' indexes count inside it
+        (topics of an MCAP file without chunks have no count there, and go unchecked)."""
+        if (start_ns is None or start_ns <= self._info.start_ns) and (
+            stop_ns is None or stop_ns >= self._info.end_ns
+        ):
+            return self._promised
+        try:
+            return window_counts(self._reader, conns, start_ns, stop_ns)
+        except (OSError, ValueError, KeyError, IndexError, struct.error) as err:
+            raise BagReadError(
+                f"its message index cannot be read ({type(err).__name__}: {err})",
+                uri=self._uri,
+                fix="the bag is corrupt or its index is stale: reindex it "
+                "(`ros2 bag reindex` / `rosbag reindex`).",
+            ) from err
+
+    def _check_counts(self, yielded: dict[str, int], promises: Mapping[str, int], window: str) -> None:
         """Fewer messages than the index promises is an error naming the topic, never a short dataset."""
         for topic, count in yielded.items():
-            promised = self._promised.get(topic, 0)
+            promised = promises.get(topic, 0)
             if count < promised:
                 raise BagReadError(
-                    f"yielded {count} messages on {topic}, its index promises {promised}",
+                    f"yielded {count} messages on {topic}{window}, its index promises {promised}",
                     uri=self._uri,
                     topic=topic,
                     fix="the bag is truncated or its index is stale: reindex it "

@@ -41,8 +41,9 @@ def field_at(msg: Any, path: str, topic: str) -> Any:
         attr, index = match.group(1), match.group(2)
         if not hasattr(value, attr):
             fields = [f for f in getattr(value, "__dataclass_fields__", {}) if not f.startswith("_")]
+            name = getattr(value, "__msgtype__", type(value).__name__)  # the ROS name, not rosbags' class
             raise DecodeError(
-                f"selector {path!r}: {type(value).__name__} has no field {attr!r} (fields: {fields})",
+                f"selector {path!r}: {name} has no field {attr!r} (fields: {fields})",
                 topic=topic,
                 fix="fix selector.names in the contract.",
             )

@@ -7,22 +7,28 @@ import re
 import shutil
 import sqlite3
 import stat
+from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 import yaml
 from mcap.writer import Writer as McapWriter
+from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin
 from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags import open_bag
+from bagport.bags.typeload import TolerantAnyReader
 from bagport.errors import BagReadError
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import realbag
 
 STORE = get_typestore(Stores.ROS2_HUMBLE)
 STRING, BOOL = "std_msgs/msg/String", "std_msgs/msg/Bool"
+STORE_ROS1 = get_typestore(Stores.ROS1_NOETIC)
+STRING_ROS1, BOOL_ROS1 = "std_msgs/msg/String", "std_msgs/msg/Bool"
 SPLIT = "rosbag2_split/wbag"
 SPLIT_FILES = [f"wbag_{i}.mcap" for i in range(5)]
 
@@ -230,6 +236,91 @@ def test_fewer_messages_than_the_index_promises_is_an_error_naming_topic_and_cou
         assert len(list(reader.messages(["/b"]))) == 5
         with pytest.raises(BagReadError, match=r"yielded 5 messages on /s, its index promises 7.*reindex"):
             list(reader.messages(["/s"]))
+
+
+def _write_strings_any(path: Path, storage: str) -> Path:
+    """``write_strings`` in MCAP, SQLite or ROS 1 (``path.bag``); returns what to open."""
+    if storage != "ros1":
+        write_strings(path, StoragePlugin.MCAP if storage == "mcap" else StoragePlugin.SQLITE3)
+        return path
+    bag = path.with_suffix(".bag")
+    with Ros1Writer(bag) as writer:
+        text = writer.add_connection("/s", STRING_ROS1, typestore=STORE_ROS1)
+        flag = writer.add_connection("/b", BOOL_ROS1, typestore=STORE_ROS1)
+        for i in range(5):
+            writer.write(
+                text,
+                100 + i,
+                STORE_ROS1.serialize_ros1(STORE_ROS1.types[STRING_ROS1](data=f"hi {i}"), STRING_ROS1),
+            )
+            writer.write(
+                flag, 100 + i, STORE_ROS1.serialize_ros1(STORE_ROS1.types[BOOL_ROS1](data=True), BOOL_ROS1)
+            )
+    return bag
+
+
+def _drop_first_message_on(topic: str) -> Callable[..., Iterator[tuple[Any, int, bytes]]]:
+    """``TolerantAnyReader.messages`` that loses the first message on ``topic``: a short reader."""
+    original = TolerantAnyReader.messages
+
+    def messages(self: TolerantAnyReader, *args: Any, **kwargs: Any) -> Iterator[tuple[Any, int, bytes]]:
+        dropped = False
+        for conn, log_ns, raw in original(self, *args, **kwargs):
+            if conn.topic == topic and not dropped:
+                dropped = True
+                continue
+            yield conn, log_ns, raw
+
+    return messages
+
+
+FORMATS = ["mcap", "sqlite3", "ros1"]
+
+
+@pytest.mark.parametrize("storage", FORMATS)
+def test_windowed_read_yielding_fewer_messages_than_the_index_promises_is_an_error(
+    tmp_path: Path, storage: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    bag = _write_strings_any(tmp_path / "short", storage)
+    monkeypatch.setattr(TolerantAnyReader, "messages", _drop_first_message_on("/s"))
+    with open_bag(str(bag)) as reader:
+        assert len(list(reader.messages(["/b"], start_ns=101, stop_ns=104))) == 3
+        with pytest.raises(
+            BagReadError,
+            match=r"short.*yielded 2 messages on /s in \[101, 104\) ns, its index promises 3.*reindex",
+        ):
+            list(reader.messages(["/s", "/b"], start_ns=101, stop_ns=104))
+
+
+@pytest.mark.parametrize("storage", FORMATS)
+@pytest.mark.parametrize(
+    ("start_ns", "stop_ns", "expected"),
+    [(101, 104, 3), (104, 105, 1), (0, 102, 2), (103, None, 2), (200, 300, 0), (None, None, 5)],
+    ids=["straddles", "last", "head", "tail", "after", "whole"],
+)
+def test_windowed_read_of_a_healthy_bag_passes_the_check(
+    tmp_path: Path, storage: str, start_ns: int | None, stop_ns: int | None, expected: int
+) -> None:
+    bag = _write_strings_any(tmp_path / "healthy", storage)
+    with open_bag(str(bag)) as reader:
+        topics = [m.topic for m in reader.messages(start_ns=start_ns, stop_ns=stop_ns)]
+    assert sorted(topics) == ["/b"] * expected + ["/s"] * expected
+
+
+def test_window_holding_the_whole_bag_is_checked_against_metadata(tmp_path: Path) -> None:
+    folder = tmp_path / "stale"
+    write_strings(folder)
+    data = yaml.safe_load((folder / "metadata.yaml").read_text())
+    for entry in data["rosbag2_bagfile_information"]["topics_with_message_count"]:
+        if entry["topic_metadata"]["name"] == "/s":
+            entry["message_count"] = 7
+    (folder / "metadata.yaml").write_text(yaml.safe_dump(data))
+    with open_bag(str(folder)) as reader:
+        assert len(list(reader.messages(["/s"], start_ns=101, stop_ns=103))) == 2  # the index agrees
+        with pytest.raises(
+            BagReadError, match=r"yielded 5 messages on /s in \[0, 1000\) ns, its index promises 7"
+        ):
+            list(reader.messages(["/s"], start_ns=0, stop_ns=1000))
 
 
 def test_sqlite_bags_are_read_without_writing_beside_them(tmp_path: Path) -> None:

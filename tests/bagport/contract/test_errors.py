@@ -5,6 +5,7 @@ One test per mistake the issue lists; those that need a bag check the contract a
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,7 @@ from bagport.contract import parse_contract
 from bagport.errors import ContractError
 from bagport.feature_table import describe_features
 from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import realbag
 
 FLOAT = "std_msgs/msg/Float64"
 
@@ -110,6 +112,34 @@ def test_selector_naming_a_joint_no_message_has(bag: str) -> None:
         r"in this JointState message \(it has \['j1', 'j2', 'j3', 'j4', 'j5', 'j6'\]\)",
     ):
         describe_features(parse_contract(text, "robot.yaml"), bag)
+
+
+@pytest.mark.parametrize(
+    ("path", "message", "missing", "fields"),
+    [
+        ("twist.linear.q", "geometry_msgs/msg/Twist", "twist", "'linear', 'angular'"),
+        ("linear.q", "geometry_msgs/msg/Vector3", "q", "'x', 'y', 'z'"),
+    ],
+    ids=["top", "nested"],
+)
+def test_selector_dot_path_naming_a_field_the_message_does_not_have(
+    path: str, message: str, missing: str, fields: str
+) -> None:
+    twist = realbag("rosbag2parquet/base_msgs")  # one real geometry_msgs/msg/Twist on /one_shot/twist
+    text = (
+        "robot_type: r\nobservations:\n"
+        "  - key: observation.state\n"
+        "    topic: /one_shot/twist\n"
+        "    type: geometry_msgs/msg/Twist\n"
+        f"    selector: {{names: [linear.x, {path}]}}\n"
+    )
+    with pytest.raises(
+        ContractError,
+        match=rf"^robot\.yaml:3 \(observations\[key=observation\.state\]\.selector\): selector '{re.escape(path)}': "
+        rf"{message} has no field '{missing}' \(fields: \[{fields}\]\) \(first message on /one_shot/twist in "
+        rf".*base_msgs\) Fix: fix selector\.names in the contract\.$",
+    ):
+        describe_features(parse_contract(text, "robot.yaml"), str(twist))
 
 
 def test_type_mismatch_between_contract_and_bag(bag: str) -> None:

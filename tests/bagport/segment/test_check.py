@@ -60,7 +60,7 @@ def _contract(episodes: str) -> str:
         ),
         pytest.param(
             "episodes:\n  events:\n    topic: /episode_events\n    field: text\n",
-            r"c\.yaml:39 \(episodes\.events\.field\): selector 'text': std_msgs__msg__String has no field 'text' "
+            r"c\.yaml:39 \(episodes\.events\.field\): selector 'text': std_msgs/msg/String has no field 'text' "
             r"\(fields: \['data'\]\) \(first message on /episode_events\)",
             id="events-field-missing",
         ),

@@ -117,3 +117,26 @@ def test_dask_runner_starts_a_local_cluster_or_connects_to_an_address() -> None:
     config = ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out", dask_address="tcp://h:8786")
     remote = _dask_runner(config, workers=3)
     assert remote.address == "tcp://h:8786"  # type: ignore[attr-defined]
+
+
+@pytest.mark.slow
+def test_the_flow_starts_its_own_local_dask_cluster(tmp_path: Path) -> None:
+    """``--runner dask`` without an address, on one machine: the flow starts a LocalCluster of worker
+    processes for the run (and closes it), and the dataset loads in LeRobot."""
+    for seed in (1, 2):
+        write_episode_bag(tmp_path / f"bags/ep{seed}", "mcap", EpisodeSpec(duration_s=1.0, seed=seed))
+    env = {**os.environ, "PREFECT_LOGGING_LEVEL": "INFO"}
+    proc = subprocess.run(
+        [
+            sys.executable, "-m", "flows.cli", "convert",
+            "--glob", str(tmp_path / "bags/*"),
+            "--contract", str(SAMPLE_CONTRACT),
+            "--output", str(tmp_path / "ds"),
+            "--runner", "dask", "--workers", "2", "--verbose",
+        ],
+        capture_output=True, text=True, check=False, cwd=REPO, env=env,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    logs = proc.stdout + proc.stderr
+    assert "Creating a new Dask cluster with `distributed.deploy.local.LocalCluster`" in logs
+    assert validate_dataset(tmp_path / "ds", repo_id="test/dask-local").episodes == 2

@@ -1,11 +1,11 @@
-"""Every numeric decoder through the whole pipeline: a bag with known values -> convert ->
-LeRobot loads the dataset -> the values are the ones written, dimension by dimension."""
+"""Every numeric decoder through the whole pipeline, in each storage format (MCAP, SQLite, ROS 1): a bag
+with known values -> convert -> LeRobot loads the dataset -> the values are the ones written."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pytest
@@ -335,10 +335,13 @@ def _convert(bag: Path, tmp_path: Path, **options: Any) -> Path:
     return out
 
 
-def test_every_decoder_matches_the_values_written(tmp_path: Path) -> None:
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3", "ros1"])
+def test_every_decoder_matches_the_values_written(
+    tmp_path: Path, storage: Literal["mcap", "sqlite3", "ros1"]
+) -> None:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
 
-    bag = write_bag(tmp_path / "truth", "mcap", TS, _streams())
+    bag = write_bag(tmp_path / "truth", storage, TS, _streams())
     rows = {row.key: row for row in describe_features(parse_contract(_contract(), "c.yaml"), str(bag))}
     assert rows["observation.tf_tool"].names == tuple(
         f"tool0.{p}"

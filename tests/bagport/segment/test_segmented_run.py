@@ -255,3 +255,31 @@ def test_a_resumed_run_reads_only_the_bags_of_episodes_not_staged_yet(
     reduce_run(plan, staged)
     assert validate_dataset(tmp_path / "ds", repo_id="test/resume").episodes == 4
     assert not (tmp_path / "staging").exists()  # the kept segmentations go with the staged episodes
+
+
+def test_a_discarded_demonstration_is_left_out_with_its_reason(tmp_path: Path) -> None:
+    spec = replace(
+        SPEC,
+        duration_s=5.0,
+        prompts=(),
+        events=(
+            (0.5, "START"),
+            (2.0, "SUCCESS"),
+            (2.2, "RESET"),
+            (2.7, "START"),
+            (4.0, "DISCARD"),
+            (4.2, "RESET"),
+        ),
+    )
+    write_episode_bag(tmp_path / "session", "mcap", spec)
+    (tmp_path / "manifest.yaml").write_text("bags:\n  - uri: session\n")
+    (tmp_path / "contract.yaml").write_text(SAMPLE_CONTRACT.read_text() + EPISODES)
+    out = tmp_path / "ds"
+    _convert(tmp_path, out)
+    assert validate_dataset(out, repo_id="test/discard", decode_every=10).episodes == 1
+    run = json.loads((out / "meta/provenance/run.json").read_text())
+    assert [e["label"] for e in run["episodes"]] == ["success"]
+    assert [(e["segment"], e["label"], e["excluded_by_label"]) for e in run["excluded"]] == [
+        (1, "discarded", True)
+    ]
+    assert run["excluded"][0]["reason"].startswith("labelled discarded")

@@ -12,11 +12,16 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import yaml
 
 from bagport.errors import BagportError
+
+if TYPE_CHECKING:
+    import pydantic
+
+    from bagport.config import ConvertConfig
 
 __all__ = ["main"]
 
@@ -84,13 +89,10 @@ def _cmd_convert(args: argparse.Namespace) -> int:
             unused.stop()
 
 
-def _convert(args: argparse.Namespace) -> int:
+def _convert_config(args: argparse.Namespace) -> ConvertConfig:
     from bagport.config import ConvertConfig  # noqa: PLC0415
-    from bagport.run import summary_json  # noqa: PLC0415
-    from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
-    from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
 
-    config = ConvertConfig(
+    return ConvertConfig(
         manifest=args.manifest,
         bags_glob=args.glob,
         append=args.append,
@@ -101,6 +103,7 @@ def _convert(args: argparse.Namespace) -> int:
         workers=args.workers,
         runner=args.runner,
         dask_address=args.dask_address,
+        ray_address=args.ray_address,
         encoder=_load_encoder(args.codec),
         overwrite=args.overwrite,
         keep_staging=args.keep_staging,
@@ -113,6 +116,29 @@ def _convert(args: argparse.Namespace) -> int:
         msg_path=args.msg_path,
         fail_fast=args.fail_fast,
     )
+
+
+def _option_errors(err: pydantic.ValidationError) -> str:
+    """Pydantic's findings about the options, one clause each, without its URLs."""
+    clauses = []
+    for item in err.errors():
+        where = ".".join(str(part) for part in item["loc"])
+        message = item["msg"].removeprefix("Value error, ")
+        clauses.append(f"{where}: {message}" if where else message)
+    return "; ".join(clauses)
+
+
+def _convert(args: argparse.Namespace) -> int:
+    import pydantic  # noqa: PLC0415
+
+    from bagport.run import summary_json  # noqa: PLC0415
+    from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
+    from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
+
+    try:
+        config = _convert_config(args)
+    except pydantic.ValidationError as err:
+        raise BagportError(f"invalid options: {_option_errors(err)}") from err
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
     if show_bar:
@@ -264,12 +290,18 @@ def _parser() -> argparse.ArgumentParser:
     convert.add_argument("--workers", type=int, default=None, help="parallel episodes (default: CPU count)")
     convert.add_argument(
         "--runner",
-        choices=["process", "thread", "dask"],
+        choices=["process", "thread", "dask", "ray"],
         default="process",
-        help="process pool (default), threads, or Dask (a local cluster, or --dask-address)",
+        help="process pool (default), threads, Dask (a local cluster, or --dask-address) "
+        "or Ray (a local instance, or --ray-address; needs the extra: pip install 'bagport[ray]')",
     )
     convert.add_argument(
         "--dask-address", default=None, help="existing Dask scheduler, e.g. tcp://10.0.0.5:8786"
+    )
+    convert.add_argument(
+        "--ray-address",
+        default=None,
+        help="existing Ray cluster, e.g. ray://10.0.0.5:10001, or 'auto' (the cluster this machine belongs to)",
     )
     convert.add_argument(
         "--codec",

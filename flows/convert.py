@@ -30,7 +30,7 @@ from tasks.plan import plan_task
 from tasks.reduce import reduce_task
 from tasks.segment import segment_bag_task
 
-__all__ = ["ConversionError", "convert_flow", "run_config", "run_convert"]
+__all__ = ["ConversionError", "RayMissingError", "convert_flow", "run_config", "run_convert"]
 
 
 class ConversionError(BagportError):
@@ -199,11 +199,30 @@ def _cancel_unfinished(futures: list[PrefectFuture[Any]]) -> int:
     """
     unfinished = 0
     for future in futures:
-        wrapped = getattr(future, "wrapped_future", None)  # a concurrent.futures or distributed future
-        if wrapped is not None and not wrapped.done():
+        wrapped = getattr(future, "wrapped_future", None)  # a concurrent.futures, distributed or Ray future
+        if wrapped is None:
+            continue
+        if not hasattr(wrapped, "done"):
+            unfinished += _cancel_ray(wrapped)
+        elif not wrapped.done():
             wrapped.cancel()
             unfinished += 1
     return unfinished
+
+
+def _cancel_ray(ref: Any) -> bool:
+    """Cancel a Ray task unless it finished; whether it had not.
+
+    Unlike a process or thread, Ray interrupts a running task too; it stages nothing then, as
+    ``episode.json`` is written last, and a re-run converts that episode again.
+    """
+    import ray  # noqa: PLC0415 - only a Ray future gets here
+
+    ready, _ = ray.wait([ref], timeout=0)
+    if ready:
+        return False
+    ray.cancel(ref)
+    return True
 
 
 @contextmanager
@@ -276,17 +295,57 @@ def _dask_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
     return runner
 
 
+class RayMissingError(BagportError):
+    """``--runner ray`` without the ``ray`` extra installed."""
+
+    def __init__(self, missing: str) -> None:
+        super().__init__(
+            f"--runner ray needs prefect-ray and Ray, which are not installed here ({missing}). "
+            "Fix: pip install 'bagport[ray]' (uv sync --extra ray; make setup installs every extra), "
+            "or choose --runner process, thread or dask."
+        )
+
+
+def _ray_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
+    """Ray through prefect-ray: an existing cluster, or a local instance of ``workers`` CPUs.
+
+    Each episode is a Ray task holding Ray's default of one CPU, so a node with N CPUs converts
+    at most N episodes at once, like one Dask worker thread per episode. Workers share no disk
+    with the flow: bags, staging and output move as fsspec URIs.
+    """
+    try:
+        from prefect_ray import RayTaskRunner  # noqa: PLC0415 - only when asked for
+    except ImportError as err:
+        raise RayMissingError(str(err)) from err
+
+    runner: TaskRunner[Any]
+    if config.ray_address == "auto":
+        # prefect-ray would drop "auto" and start a local instance where none runs; Ray's "auto"
+        # connects to the cluster this machine belongs to, or fails.
+        runner = RayTaskRunner(init_kwargs={"address": "auto"})
+    elif config.ray_address:
+        runner = RayTaskRunner(address=config.ray_address)
+    else:
+        # "local": a fresh instance even where one runs already (ray.init would join that one).
+        runner = RayTaskRunner(
+            init_kwargs={"address": "local", "num_cpus": workers, "num_gpus": 0, "include_dashboard": False}
+        )
+    return runner
+
+
 def run_config(config: ConvertConfig) -> DatasetReport:
     """Run the conversion flow (or subflow, inside a deployment's flow) with the config's task runner."""
     workers = config.workers or os.cpu_count() or 1
     runner: TaskRunner[Any]
     if config.runner == "dask":
         runner = _dask_runner(config, workers)
+    elif config.runner == "ray":
+        runner = _ray_runner(config, workers)
     elif config.runner == "process" and workers > 1:
         runner = ProcessPoolTaskRunner(max_workers=workers)
     else:
         runner = ThreadPoolTaskRunner(max_workers=workers)
-    # Prefect types task_runner as TaskRunner[PrefectFuture]; both runners are, but not in its stubs.
+    # Prefect types task_runner as TaskRunner[PrefectFuture]; every runner is, but not in its stubs.
     flow_with_runner = convert_flow.with_options(task_runner=runner)  # type: ignore[arg-type]
     state = flow_with_runner(config, return_state=True)
     if not state.is_completed():

@@ -32,12 +32,17 @@ class ConvertConfig(BaseModel):
     workers: PositiveInt | None = Field(
         default=None, description="Parallel episode workers; default: CPU count."
     )
-    runner: Literal["process", "thread", "dask"] = Field(
+    runner: Literal["process", "thread", "dask", "ray"] = Field(
         default="process", description="Task runner for the fan-out."
     )
     dask_address: str | None = Field(
         default=None,
         description="Existing Dask scheduler (tcp://host:port); default: a local cluster of processes.",
+    )
+    ray_address: str | None = Field(
+        default=None,
+        description="Existing Ray cluster (ray://head:10001, or 'auto' for the one this machine belongs to); "
+        "default: a local Ray instance with `workers` CPUs, started for the run.",
     )
     encoder: dict[str, Any] = Field(
         default_factory=default_encoder,
@@ -77,6 +82,16 @@ class ConvertConfig(BaseModel):
     def _one_bag_source(self) -> ConvertConfig:
         if (self.manifest is None) == (self.bags_glob is None):
             raise ValueError("give exactly one of manifest and bags_glob")
+        return self
+
+    @model_validator(mode="after")
+    def _address_of_its_runner(self) -> ConvertConfig:
+        for runner, address in (("dask", self.dask_address), ("ray", self.ray_address)):
+            if address is not None and self.runner != runner:
+                raise ValueError(
+                    f"{runner}_address {address!r} is only used with runner {runner!r}, not {self.runner!r}: "
+                    f"add --runner {runner} (runner: {runner}), or leave the address out"
+                )
         return self
 
     def manifest_text(self) -> tuple[str, str] | None:

@@ -224,14 +224,19 @@ def test_a_type_that_cannot_be_loaded_fails_only_the_topics_that_use_it(tmp_path
             list(reader.messages(["/s"]))
 
 
-def test_fewer_messages_than_the_index_promises_is_an_error_naming_topic_and_counts(tmp_path: Path) -> None:
-    folder = tmp_path / "short"
+def _write_strings_promising_seven(folder: Path) -> None:
+    """The strings bag (5 messages per topic) whose metadata.yaml promises 7 on /s."""
     write_strings(folder)
     data = yaml.safe_load((folder / "metadata.yaml").read_text())
     for entry in data["rosbag2_bagfile_information"]["topics_with_message_count"]:
         if entry["topic_metadata"]["name"] == "/s":
             entry["message_count"] = 7
     (folder / "metadata.yaml").write_text(yaml.safe_dump(data))
+
+
+def test_fewer_messages_than_the_index_promises_is_an_error_naming_topic_and_counts(tmp_path: Path) -> None:
+    folder = tmp_path / "short"
+    _write_strings_promising_seven(folder)
     with open_bag(str(folder)) as reader:
         assert len(list(reader.messages(["/b"]))) == 5
         with pytest.raises(BagReadError, match=r"yielded 5 messages on /s, its index promises 7.*reindex"):
@@ -309,12 +314,7 @@ def test_windowed_read_of_a_healthy_bag_passes_the_check(
 
 def test_window_holding_the_whole_bag_is_checked_against_metadata(tmp_path: Path) -> None:
     folder = tmp_path / "stale"
-    write_strings(folder)
-    data = yaml.safe_load((folder / "metadata.yaml").read_text())
-    for entry in data["rosbag2_bagfile_information"]["topics_with_message_count"]:
-        if entry["topic_metadata"]["name"] == "/s":
-            entry["message_count"] = 7
-    (folder / "metadata.yaml").write_text(yaml.safe_dump(data))
+    _write_strings_promising_seven(folder)
     with open_bag(str(folder)) as reader:
         assert len(list(reader.messages(["/s"], start_ns=101, stop_ns=103))) == 2  # the index agrees
         with pytest.raises(

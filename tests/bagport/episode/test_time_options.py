@@ -284,14 +284,9 @@ def test_disordered_stamps_are_counted_and_handled_deterministically(tmp_path: P
     )
     write_episode_bag(tmp_path / "ep", "mcap", spec)
     text = _contract().replace("{strategy: interpolate}\nactions", "{strategy: hold}\nactions")
-    first = _convert(tmp_path / "ep", tmp_path / "a", text)
-    again = _convert(tmp_path / "ep", tmp_path / "b", text)
-    assert pq.read_table(Path(first.dir_uri) / FRAMES_FILE).equals(
-        pq.read_table(Path(again.dir_uri) / FRAMES_FILE)
-    )
-    qa = json.loads((Path(first.dir_uri) / QA_FILE).read_text())
-    counts = {c["check"]: c["value"] for c in qa["checks"] if c["subject"] == "/joint_states"}
-    assert counts["time.out_of_order"] == 2 and counts["time.duplicate_stamps"] == 3
+    first = _converts_identically(tmp_path, text)
+    checks = _qa_values(first, "/joint_states")
+    assert checks["time.out_of_order"]["value"] == 2 and checks["time.duplicate_stamps"]["value"] == 3
     # hold picks the largest stamp at or before the tick, whatever the log order
     prov = [
         r
@@ -299,6 +294,16 @@ def test_disordered_stamps_are_counted_and_handled_deterministically(tmp_path: P
         if r["key"] == "observation.state"
     ]
     assert all(0 <= r["tick_ns"] - r["source_header_ns"] < 10_000_000 for r in prov)
+
+
+def _converts_identically(tmp_path: Path, text: str) -> EpisodeSummary:
+    """Convert ``tmp_path/ep`` twice; the frames must be the same both times (deterministic handling)."""
+    first = _convert(tmp_path / "ep", tmp_path / "a", text)
+    again = _convert(tmp_path / "ep", tmp_path / "b", text)
+    assert pq.read_table(Path(first.dir_uri) / FRAMES_FILE).equals(
+        pq.read_table(Path(again.dir_uri) / FRAMES_FILE)
+    )
+    return first
 
 
 def _qa_values(summary: EpisodeSummary, subject: str) -> dict[str, Any]:
@@ -331,11 +336,8 @@ def test_a_clock_jump_is_counted_and_converts_the_same_every_time(tmp_path: Path
     same frames on every conversion."""
     spec = EpisodeSpec(duration_s=2.0, cameras=(), task=None, faults=Faults(joint_clock_jump_s=2.0))
     write_episode_bag(tmp_path / "ep", "mcap", spec)
-    text = _contract().replace("{strategy: interpolate}", "{strategy: hold}")
-    first = _convert(tmp_path / "ep", tmp_path / "a", text)
-    again = _convert(tmp_path / "ep", tmp_path / "b", text)
-    assert pq.read_table(Path(first.dir_uri) / FRAMES_FILE).equals(
-        pq.read_table(Path(again.dir_uri) / FRAMES_FILE)
+    first = _converts_identically(
+        tmp_path, _contract().replace("{strategy: interpolate}", "{strategy: hold}")
     )
     jumps = _qa_values(first, "/joint_states")["time.clock_jumps"]
     assert (jumps["value"], jumps["verdict"]) == (1, "fail")

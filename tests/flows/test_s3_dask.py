@@ -114,7 +114,9 @@ def test_dask_runner_starts_a_local_cluster_or_connects_to_an_address() -> None:
         "processes": True,
         "dashboard_address": None,
     }
-    config = ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out", dask_address="tcp://h:8786")
+    config = ConvertConfig(
+        manifest="m.yaml", contract="c.yaml", output="out", runner="dask", dask_address="tcp://h:8786"
+    )
     remote = _dask_runner(config, workers=3)
     assert remote.address == "tcp://h:8786"  # type: ignore[attr-defined]
 

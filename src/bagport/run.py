@@ -22,9 +22,7 @@ from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.history import converted_bags
-from bagport.dataset.publish import recover_local_publish
-from bagport.dataset.remote import recover_remote_publish
-from bagport.dataset.write import recover_interrupted_append
+from bagport.dataset.write import recover_interrupted_append, recover_publish
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest, parse_manifest
@@ -84,10 +82,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
         assert config.manifest is not None  # the config validates that one of the two is given
         manifest = load_manifest(config.manifest)
     fs, out_path = url_to_fs(config.output)
-    if is_local(fs):
-        recover_local_publish(Path(out_path))  # a crashed publish: back to the previous dataset
-    elif fs.exists(out_path):
-        recover_remote_publish(config.output)  # a crashed publish: back to the previous version (or nothing)
+    recover_publish(config.output)  # before reading what an --append adds to
     done: set[tuple[str, str]] = set()
     if config.append and fs.exists(out_path):
         if is_local(fs):
@@ -278,7 +273,7 @@ def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:
     """Remove this run's staged episodes and kept segmentations, then the staging store if it is empty
     (another run may share it)."""
     fs, path = url_to_fs(plan.config.resolved_staging())
-    kept_segmentations = (kept_segmentation(r) for r in plan.requests) if segments_bags(plan.contract) else ()
+    kept_segmentations = (kept_segmentation(r, plan.contract) for r in plan.requests)
     for uri in (*staged_dirs, *(u for u in kept_segmentations if u is not None)):
         _, staged_path = url_to_fs(uri)
         if fs.exists(staged_path):

@@ -28,7 +28,7 @@ from bagport.qa import QAEntry
 from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
 from bagport.uris import is_local
 
-__all__ = ["DatasetReport", "recover_interrupted_append", "write_dataset"]
+__all__ = ["DatasetReport", "recover_interrupted_append", "recover_publish", "write_dataset"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -223,10 +223,7 @@ def write_dataset(
     limits = limits or DatasetLimits()
     fs, out_path = url_to_fs(output)
     local = is_local(fs)
-    if local:
-        recover_local_publish(Path(out_path))  # a crashed publish: back to the previous dataset
-    elif fs.exists(out_path):
-        recover_remote_publish(output)  # a crashed publish: back to the previous version (or nothing)
+    recover_publish(output)
     if append and fs.exists(out_path):
         if not local:
 
@@ -317,6 +314,17 @@ def _append(
             raise
     size = sum(p.stat().st_size for p in final.rglob("*") if p.is_file())
     return replace(report, root=str(final), size_bytes=size)
+
+
+def recover_publish(output: str) -> None:
+    """Undo a crashed publish into ``output``: locally back to the previous dataset
+    (:func:`bagport.dataset.publish.recover_local_publish`), on an object store back to the previous
+    version, or nothing (:func:`bagport.dataset.remote.recover_remote_publish`)."""
+    fs, out_path = url_to_fs(output)
+    if is_local(fs):
+        recover_local_publish(Path(out_path))
+    elif fs.exists(out_path):
+        recover_remote_publish(output)
 
 
 def recover_interrupted_append(final: Path) -> None:

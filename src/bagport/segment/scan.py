@@ -103,7 +103,7 @@ def segment_request(request: EpisodeRequest) -> SegmentedBag:
     The windows are kept in the staging store (:mod:`bagport.segment.cache`): asked again for the same
     bag files, episodes options and definitions, this returns them without opening the bag.
     """
-    splitting = _splitting(request)
+    splitting = _splitting(request, parse_contract(request.contract_text, request.contract_name))
     if splitting is None:
         return SegmentedBag((request,))
     segmentation, cached = _cached_or_scanned(request, *splitting)
@@ -114,16 +114,16 @@ def segment_request(request: EpisodeRequest) -> SegmentedBag:
     return SegmentedBag(requests, segmentation.ignored, cached)
 
 
-def kept_segmentation(request: EpisodeRequest) -> str | None:
-    """Where the staging store keeps the segmentation of the request's bag (``None``: it keeps none)."""
-    splitting = _splitting(request)
+def kept_segmentation(request: EpisodeRequest, plan: ContractPlan) -> str | None:
+    """Where the staging store keeps the segmentation of the request's bag under ``plan`` (the request's
+    contract, parsed; ``None``: it keeps none)."""
+    splitting = _splitting(request, plan)
     return None if splitting is None else segmentation_uri(request, *splitting, source_stamp(request.bag_uri))
 
 
-def _splitting(request: EpisodeRequest) -> tuple[EpisodesOptions, tuple[str, ...]] | None:
+def _splitting(request: EpisodeRequest, plan: ContractPlan) -> tuple[EpisodesOptions, tuple[str, ...]] | None:
     """The contract's episodes options and stream topics, or ``None`` when the request is not split
     (the contract does not segment bags, or the manifest entry gives an explicit window)."""
-    plan = parse_contract(request.contract_text, request.contract_name)
     options = plan.contract.episodes
     if options is None or not segments_bags(plan) or request.has_window:
         return None

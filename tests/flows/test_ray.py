@@ -9,7 +9,6 @@ import shutil
 import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 import psutil
@@ -83,7 +82,6 @@ def test_convert_on_a_local_ray_instance(tmp_path: Path) -> None:
     # and every worker log line, not Ray's "[repeated 2x across cluster]" summaries.
     ray_tmp = tempfile.mkdtemp(prefix="bagport-ray-")
     env = {**os.environ, "RAY_TMPDIR": ray_tmp, "RAY_DEDUP_LOGS": "0", "BAGPORT_DEBUG": "0"}
-    started = time.perf_counter()
     with subprocess.Popen(
         [
             sys.executable, "-m", "flows.cli", "convert",
@@ -95,7 +93,6 @@ def test_convert_on_a_local_ray_instance(tmp_path: Path) -> None:
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=REPO, env=env,
     ) as proc:  # fmt: skip
         stdout, stderr = proc.communicate(timeout=300)
-    wall_s = time.perf_counter() - started
     assert proc.returncode == 0, stderr[-3000:]
     assert "Started a local Ray instance" in stderr
     ran = {name: int(pid) for pid, name in FINISHED.findall(stdout + stderr)}
@@ -105,7 +102,6 @@ def test_convert_on_a_local_ray_instance(tmp_path: Path) -> None:
     assert len(set(ran.values())) <= 2  # num_cpus = --workers: at most 2 workers, one episode each
     report = validate_dataset(out, repo_id="test/ray")
     assert report.episodes == EPISODES
-    assert wall_s < 120, f"the Ray run took {wall_s:.0f} s"
     # The run shut its Ray instance down: no raylet, GCS or worker of it is left.
     left = [
         p.info["pid"]

@@ -223,9 +223,30 @@ def _cmd_validate(args: argparse.Namespace) -> int:
     print(
         f"OK {report.root}: {report.episodes} episode(s), {report.frames} frames, "
         f"{report.frames_decoded} decoded through LeRobot ({report.video_backend}); videos: "
-        f"{', '.join(report.video_keys) or 'none'}"
+        f"{', '.join(report.video_keys) or 'none'}; {report.files_checked} file(s) match their SHA-256"
     )
     return 0
+
+
+def _cmd_repair(args: argparse.Namespace) -> int:
+    from bagport.dataset.repair import repair_dataset  # noqa: PLC0415
+
+    report = repair_dataset(args.output, clean_scratch=True)
+    for action in report.actions:
+        print(action)
+    if not report.actions:
+        print(f"{args.output}: nothing to repair")
+    return 0
+
+
+def _install_crash_hook() -> None:
+    """Test-only: ``BAGPORT_CRASH_AT=<step>`` SIGKILLs the process right after that commit step
+    (see :mod:`bagport.dataset.crashpoints`); the library itself reads no environment."""
+    step = os.environ.get("BAGPORT_CRASH_AT")
+    if step:
+        from bagport.dataset.crashpoints import kill_after, set_hook  # noqa: PLC0415
+
+        set_hook(kill_after(step))
 
 
 def _cmd_contract_check(args: argparse.Namespace) -> int:
@@ -367,11 +388,19 @@ def _parser() -> argparse.ArgumentParser:
     inspect.add_argument("uri", nargs="+", help="bag folder, .mcap, .db3 or .bag (local or fsspec URI)")
     inspect.set_defaults(func=_cmd_inspect)
 
-    validate = sub.add_parser("validate", help="load a dataset with LeRobot and decode every frame")
+    validate = sub.add_parser(
+        "validate", help="check checksums, load a dataset with LeRobot and decode every frame"
+    )
     validate.add_argument("root", help="dataset folder")
     validate.add_argument("--repo-id", default=None)
     validate.add_argument("--every", type=int, default=1, help="decode every n-th frame (default: all)")
     validate.set_defaults(func=_cmd_validate)
+
+    repair = sub.add_parser(
+        "repair", help="finish or undo a write into a dataset that a crash interrupted, and say what was done"
+    )
+    repair.add_argument("output", help="dataset folder or URI (as given to convert --output)")
+    repair.set_defaults(func=_cmd_repair)
 
     contract = sub.add_parser("contract", help="work with contracts")
     contract_sub = contract.add_subparsers(dest="contract_command", required=True)
@@ -419,6 +448,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     else:
         os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     func: Callable[[argparse.Namespace], int] = args.func
+    _install_crash_hook()
     try:
         return func(args)
     except BagportError as err:

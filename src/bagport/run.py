@@ -10,7 +10,6 @@ import json
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
-from pathlib import Path
 from typing import Any
 
 import fsspec
@@ -22,14 +21,14 @@ from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.history import converted_bags
-from bagport.dataset.write import recover_interrupted_append, recover_publish
+from bagport.dataset.repair import repair_dataset
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
 from bagport.segment import EXCLUDED_LABELS, kept_segmentation, label_reason, segment_request, segments_bags
 from bagport.staging import QA_FILE, EpisodeSummary, read_summary
-from bagport.uris import is_local, read_text
+from bagport.uris import read_text
 from bagport.video import EncoderSettings
 
 __all__ = ["EpisodeFailure", "RunPlan", "plan_run", "reduce_run", "segment_all"]
@@ -82,11 +81,9 @@ def plan_run(config: ConvertConfig) -> RunPlan:
         assert config.manifest is not None  # the config validates that one of the two is given
         manifest = load_manifest(config.manifest)
     fs, out_path = url_to_fs(config.output)
-    recover_publish(config.output)  # before reading what an --append adds to
+    repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to
     done: set[tuple[str, str]] = set()
     if config.append and fs.exists(out_path):
-        if is_local(fs):
-            recover_interrupted_append(Path(out_path))
         done = converted_bags(config.output)
     elif fs.exists(out_path) and not config.overwrite:
         raise DatasetWriteError(

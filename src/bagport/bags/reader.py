@@ -5,7 +5,6 @@ from __future__ import annotations
 import contextlib
 import shutil
 import struct
-import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
@@ -30,6 +29,7 @@ from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
 from bagport.bags.typeload import TolerantAnyReader, is_service_event
 from bagport.bags.typesources import complete_typestore, parse_msg_definitions, undefined_type_error
 from bagport.errors import BagportError, BagReadError, TransientError
+from bagport.scratch import scratch_dir
 from bagport.uris import is_local
 
 __all__ = ["BagReader", "open_bag"]
@@ -96,7 +96,7 @@ class RosbagsReader:
         self._uri = uri
         self._cleanup = cleanup
         self._remote = remote
-        self._scratch = Path(tempfile.mkdtemp(prefix="bagport-link-"))
+        self._scratch = scratch_dir("link")
         try:
             plan = plan_reads(path, storage, self._scratch, uri)
         except BaseException:
@@ -305,7 +305,7 @@ def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | N
         raise BagReadError(f"cannot be opened ({err})", uri=uri, fix="check the URI scheme.") from err
     if is_local(fs):
         return Path(path), None
-    scratch = Path(tempfile.mkdtemp(prefix="bagport-bag-"))
+    scratch = scratch_dir("bag")
     local = scratch / path.rstrip("/").rsplit("/", 1)[-1]
     try:
         if fs.isdir(path):

@@ -23,6 +23,7 @@ from typing import IO, Any
 from fsspec import AbstractFileSystem
 
 from bagport.errors import TransientError
+from bagport.scratch import scratch_dir
 
 __all__ = ["RemoteBag", "RemotePath", "TransferStats"]
 
@@ -146,7 +147,7 @@ class RemoteBag:
     fs: AbstractFileSystem
     uri: str
     stats: TransferStats = field(default_factory=lambda: TransferStats("ranged"))
-    scratch: Path = field(default_factory=lambda: Path(tempfile.mkdtemp(prefix="bagport-ranges-")))
+    scratch: Path = field(default_factory=lambda: scratch_dir("ranges"))
     _files: dict[str, _SpilledRanges] = field(default_factory=dict)
 
     def fetch(self, path: str, start: int, end: int) -> bytes:

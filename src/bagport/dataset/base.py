@@ -18,6 +18,7 @@ import pandas as pd
 from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
+from bagport.dataset.checksums import latest_record
 from bagport.dataset.layout import HISTOGRAMS_PATH, INFO_PATH, STATS_PATH, TASKS_PATH, next_chunk_file
 from bagport.errors import DatasetWriteError
 from bagport.stats import FeatureStats, stats_from_json
@@ -41,6 +42,8 @@ class DatasetBase:
     """Runs recorded so far (``meta/provenance/run.json`` is run 0, appends add ``run-001.json``...)."""
     data_files: tuple[str, ...] = ()
     """The existing data files (read, never rewritten: dataset-wide quantiles cover their frames)."""
+    checksums: dict[str, str] | None = None
+    """SHA-256 of the existing data and video files, from the newest run record (``None``: not recorded)."""
 
     @property
     def episodes(self) -> int:
@@ -88,6 +91,8 @@ def read_base(root: str | Path) -> DatasetBase:
     chunks = int(info["chunks_size"])
     video_keys = [k for k, f in info["features"].items() if f.get("dtype") == "video"]
     runs = fs.glob(f"{path}/meta/provenance/run*.json")
+    newest = latest_record([str(r) for r in runs])
+    files = _read_json(fs, newest).get("files") if newest is not None else None
     return DatasetBase(
         info=info,
         tasks=tasks,
@@ -103,4 +108,7 @@ def read_base(root: str | Path) -> DatasetBase:
         data_files=tuple(
             fs.unstrip_protocol(p) for p in sorted(fs.glob(f"{path}/data/chunk-*/file-*.parquet"))
         ),
+        checksums=None
+        if files is None
+        else {rel: digest for rel, digest in files.items() if rel.startswith(("data/", "videos/"))},
     )

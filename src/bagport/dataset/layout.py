@@ -3,8 +3,6 @@
 from __future__ import annotations
 
 __all__ = [
-    "APPEND_BACKUP_DIR",
-    "APPEND_JOURNAL_PATH",
     "APPEND_RUN_RECORD_PATH",
     "CODEBASE_VERSION",
     "DATA_PATH",
@@ -12,8 +10,10 @@ __all__ = [
     "EPISODES_PATH",
     "HISTOGRAMS_PATH",
     "INFO_PATH",
+    "JOURNAL_PATH",
     "PROVENANCE_PATH",
     "RUN_RECORD_PATH",
+    "STAGED_DIR",
     "STATS_PATH",
     "TASKS_PATH",
     "VIDEO_PATH",
@@ -32,9 +32,10 @@ VIDEO_PATH = "videos/{video_key}/" + CHUNK_FILE + ".mp4"
 PROVENANCE_PATH = "meta/provenance/" + CHUNK_FILE + ".parquet"
 RUN_RECORD_PATH = "meta/provenance/run.json"
 APPEND_RUN_RECORD_PATH = "meta/provenance/run-{run:03d}.json"
-APPEND_JOURNAL_PATH = ".append-journal.json"
-"""While an append uploads to an object store: what it adds and rewrites (see bagport.dataset.remote)."""
-APPEND_BACKUP_DIR = ".append-backup-{run_id}"
+JOURNAL_PATH = ".bagport-journal.json"
+"""While a publish or append commits: its intent record (see bagport.dataset.journal)."""
+STAGED_DIR = ".bagport-staged-{run_id}"
+"""On an object store, where a publish uploads its files before the commit (inside the dataset root)."""
 HISTOGRAMS_PATH = "meta/provenance/image_histograms.json"
 """Dataset-wide pixel histograms per camera, so an append merges image stats exactly."""
 

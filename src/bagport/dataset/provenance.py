@@ -24,7 +24,12 @@ from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, PROVENANCE_PATH, RUN_RECORD_PATH
 from bagport.staging import PROVENANCE_FILE, EpisodeSummary
 
-__all__ = ["write_provenance"]
+__all__ = ["run_record_path", "write_provenance"]
+
+
+def run_record_path(base: DatasetBase | None) -> str:
+    """This run's record, relative to the dataset root (``run.json``; an append's ``run-NNN.json``)."""
+    return RUN_RECORD_PATH if base is None else APPEND_RUN_RECORD_PATH.format(run=base.run_number)
 
 
 def write_provenance(
@@ -87,5 +92,4 @@ def write_provenance(
         for i, s in enumerate(summaries, first_episode)
     ]
     record = {**run_record, "episodes": episodes}
-    record_path = RUN_RECORD_PATH if base is None else APPEND_RUN_RECORD_PATH.format(run=base.run_number)
-    (root / record_path).write_text(json.dumps(record, indent=2, default=str))
+    (root / run_record_path(base)).write_text(json.dumps(record, indent=2, default=str))

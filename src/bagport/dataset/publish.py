@@ -1,49 +1,75 @@
-"""Local publish: build a dataset beside its target, swap it into place, recover after a crash.
+"""Local commit: build beside the target, then one atomic exchange; recovery after a crash.
 
 A write into ``X`` builds in ``.X.tmp-<hex>`` beside it and holds an exclusive ``flock`` on that
-folder while it lives; replacing a dataset renames ``X`` to ``.X.old-<hex>``, the build to ``X``, then
-removes the old one. A process killed on the way leaves those folders behind, and the next write into
-``X`` recovers first (:func:`recover_local_publish`):
+folder while it lives.
 
-- a build folder nobody holds the lock of is left over from a crashed run and is removed: complete or
-  not, it is never swapped in, because the run that made it never finished (its staging store still
-  holds the episodes, so the re-run rebuilds them quickly);
-- with ``X`` missing, the newest complete ``.X.old-*`` is renamed back: a crash between the two renames
-  rolls back to the previous dataset, as a failure before them does (and as the object-store journal
-  of :mod:`bagport.dataset.remote` does);
-- with ``X`` present, ``.X.old-*`` folders are the remains of an interrupted removal and are removed.
+- **Publish** (first write or ``--overwrite``): the build is renamed to ``X``, or, when ``X``
+  exists, exchanged with it in one ``renameat2(RENAME_EXCHANGE)``: at every moment ``X`` is the old
+  or the new dataset, never missing. The build path then holds the old dataset, which is removed.
+  Where the exchange is unsupported (not Linux, or a file system without it) two renames are the
+  fallback: ``X`` -> ``.X.old-<hex>``, build -> ``X``; a crash between them leaves ``X`` missing
+  for a moment, and recovery renames the old one back.
+- **Append**: the new data/video files and the new ``meta/`` are built; the intent record
+  (:mod:`bagport.dataset.journal`) is written into ``X``; the new files are moved in (new names:
+  no old file is touched, and LeRobot, which counts frames from ``meta/``, ignores rows past
+  ``total_frames``); then ``X/meta`` and the new ``meta/`` are exchanged, the commit point.
 
-Only folders named exactly as bagport names them are touched. A build folder still locked belongs to
-a run writing ``X`` right now: recovery then refuses to go on.
+Recovery (:func:`recover_local`, run before anything reads or writes ``X``): an append record is
+rolled forward when ``X/meta/info.json`` is the new one, else back (the moved files are new names,
+so they are removed); a build folder nobody holds the lock of is removed (complete or not, its
+run never committed it: the staging store still has its episodes); with ``X`` missing the newest
+complete ``.X.old-*`` is renamed back; remains of old datasets are removed. Only names bagport
+makes are touched; a build still locked belongs to a live run and recovery refuses to go on.
 """
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import fcntl
 import os
 import re
 import shutil
+import sys
 import uuid
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
-from dataclasses import dataclass
 from pathlib import Path
 
+from fsspec.implementations.local import LocalFileSystem
+
+from bagport.dataset.crashpoints import reached
+from bagport.dataset.journal import Journal, file_sha256, read_journal, remove_journal, write_journal
+from bagport.dataset.layout import INFO_PATH
 from bagport.errors import DatasetWriteError
 
-__all__ = ["PublishRecovery", "building_beside", "recover_local_publish", "swap_into_place"]
+__all__ = ["building_beside", "commit_append", "exchange", "recover_local", "swap_into_place"]
 
 _SUFFIX = re.compile(r"\.(tmp|old)-[0-9a-f]{8}")
+_AT_FDCWD = -100
+_RENAME_EXCHANGE = 2
+_SYS_RENAMEAT2 = {"x86_64": 316, "aarch64": 276}
 
 
-@dataclass(frozen=True, slots=True)
-class PublishRecovery:
-    """What :func:`recover_local_publish` found and did."""
-
-    restored: Path | None = None
-    """The previous dataset renamed back to the target (a crash between the two renames)."""
-    removed: tuple[Path, ...] = ()
-    """Builds of crashed runs and remains of old datasets, removed."""
+def exchange(a: Path, b: Path) -> bool:
+    """Swap the two existing paths in one atomic step; ``False`` where the OS or file system cannot."""
+    if not sys.platform.startswith("linux"):
+        return False
+    libc = ctypes.CDLL(None, use_errno=True)
+    args = (_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE)
+    if hasattr(libc, "renameat2"):  # glibc >= 2.28
+        result = libc.renameat2(*args)
+    else:
+        number = _SYS_RENAMEAT2.get(os.uname().machine)
+        if number is None:
+            return False
+        result = libc.syscall(number, *args)
+    if result == 0:
+        return True
+    code = ctypes.get_errno()
+    if code in (errno.ENOSYS, errno.EINVAL, errno.ENOTSUP):
+        return False
+    raise OSError(code, f"exchanging {a} and {b}: {os.strerror(code)}")
 
 
 def _ours(final: Path, kind: str) -> list[Path]:
@@ -71,35 +97,87 @@ def _lock(folder: Path) -> int | None:
     return fd
 
 
-def recover_local_publish(final: Path) -> PublishRecovery:
-    """Undo what a crashed write into ``final`` left beside it (see the module docstring)."""
-    removed: list[Path] = []
+def _busy(final: Path, build: Path) -> DatasetWriteError:
+    return DatasetWriteError(
+        f"another bagport run is writing {final} (its build folder {build} is in use); nothing was "
+        "written. Fix: wait for that run to finish, or write to another --output."
+    )
+
+
+def _remove_unlocked(final: Path, build: Path) -> None:
+    fd = _lock(build)
+    if fd is None:
+        raise _busy(final, build)
+    try:
+        shutil.rmtree(build)
+    finally:
+        os.close(fd)
+
+
+def _prune_empty(path: Path, top: Path) -> None:
+    """Remove the empty folders from ``path`` up to (not including) ``top``."""
+    while path != top and path.is_dir() and not any(path.iterdir()):
+        path.rmdir()
+        path = path.parent
+
+
+def _recover_append(final: Path, journal: Journal) -> list[str]:
+    build = final.parent / journal.staged
+    if build.is_dir():
+        _remove_unlocked(final, build)  # refuses when the append is still running
+    meta = final / "meta"
+    retired = sorted(final.glob(".meta.old-*"))
+    if not meta.exists() and retired:  # the fallback's two renames were cut in between: still old
+        retired.pop().rename(meta)
+    for extra in retired:
+        shutil.rmtree(extra, ignore_errors=True)
+    info = final / INFO_PATH
+    if info.is_file() and file_sha256(info) == journal.info_sha256:
+        remove_journal(LocalFileSystem(), str(final))
+        return [f"finished an append into {final} that was committed (its new meta/ was in place)"]
+    removed = 0
+    for rel in journal.files:  # new names by construction: present only because this append moved them
+        target = final / rel
+        if target.is_file():
+            target.unlink()
+            removed += 1
+            _prune_empty(target.parent, final)
+    remove_journal(LocalFileSystem(), str(final))
+    return [f"rolled back an append into {final} that was not committed: removed {removed} new file(s)"]
+
+
+def recover_local(final: Path) -> list[str]:
+    """Bring ``final`` back to a consistent dataset after a crashed write; what was done, one line each
+    (empty when there was nothing to do). See the module docstring."""
+    actions: list[str] = []
+    journal = read_journal(LocalFileSystem(), str(final)) if final.is_dir() else None
+    if journal is not None:
+        actions += _recover_append(final, journal)
     for build in _ours(final, "tmp"):
-        fd = _lock(build)
-        if fd is None:
-            raise DatasetWriteError(
-                f"another bagport run is writing {final} (its build folder {build} is in use); nothing was "
-                "written. Fix: wait for that run to finish, or write to another --output."
-            )
-        try:
-            shutil.rmtree(build)
-        finally:
-            os.close(fd)
-        removed.append(build)
-    restored = None
+        _remove_unlocked(final, build)
+        actions.append(f"removed {build.name}, the build folder of a run that did not finish")
     old = _ours(final, "old")
     if not final.exists():
-        complete = [o for o in old if (o / "meta" / "info.json").is_file()]
+        complete = [o for o in old if (o / INFO_PATH).is_file()]
         if complete:
             newest = max(complete, key=lambda o: o.stat().st_ctime)  # a rename sets ctime
             newest.rename(final)
             old.remove(newest)
-            restored = final
+            actions.append(
+                f"restored the previous dataset from {newest.name} (a replace cut between renames)"
+            )
     if final.exists():
         for remains in old:
             shutil.rmtree(remains, ignore_errors=True)  # a run finishing its own swap may race us here
-            removed.append(remains)
-    return PublishRecovery(restored, tuple(removed))
+            actions.append(f"removed {remains.name}, the remains of a replaced dataset")
+        if journal is None:
+            for retired in sorted(final.glob(".meta.old-*")):  # written by bagport before the journal
+                if (final / "meta").exists():
+                    shutil.rmtree(retired, ignore_errors=True)
+                else:
+                    retired.rename(final / "meta")
+                actions.append(f"recovered {retired.name} of an append cut between its renames")
+    return actions
 
 
 @contextmanager
@@ -119,17 +197,55 @@ def building_beside(final: Path) -> Iterator[Path]:
         os.close(fd)
 
 
+def _replace(new: Path, current: Path, retired_name: str) -> None:
+    """Put ``new`` at ``current``: one exchange (``new`` then holds the old one), else two renames."""
+    if exchange(new, current):
+        return
+    retired = current.parent / retired_name
+    current.rename(retired)
+    try:
+        new.rename(current)
+    except OSError:
+        retired.rename(current)
+        raise
+    retired.rename(new)  # as the exchange would have left it: the caller removes the old one
+
+
 def swap_into_place(build: Path, final: Path) -> None:
-    """Rename ``build`` to ``final``, replacing the dataset there (kept as ``.X.old-*`` until the new
-    one is in place, then removed)."""
+    """Put the dataset built in ``build`` at ``final`` (replacing one there, atomically where the OS can);
+    ``build`` then holds the old dataset, if any, for the caller to remove."""
+    reached("local.publish.built")
     if not final.exists():
         build.rename(final)
-        return
-    retired = final.parent / f".{final.name}.old-{uuid.uuid4().hex[:8]}"
-    final.rename(retired)
-    try:
-        build.rename(final)
-    except OSError:
-        retired.rename(final)
-        raise
-    shutil.rmtree(retired, ignore_errors=True)
+    else:
+        _replace(build, final, f".{final.name}.old-{uuid.uuid4().hex[:8]}")
+    reached("local.publish.swapped")
+
+
+def _move_in(source: Path, target: Path) -> None:
+    if target.exists():
+        raise DatasetWriteError(f"{target} exists already; the dataset changed during the append")
+    target.parent.mkdir(parents=True, exist_ok=True)
+    source.rename(target)
+
+
+def commit_append(build: Path, final: Path, added: Sequence[str]) -> None:
+    """Move the new files ``added`` (relative paths) from ``build`` into ``final`` and exchange ``meta/``,
+    under the intent record (see the module docstring). ``build/meta`` then holds the old ``meta/``."""
+    reached("local.append.built")
+    for rel in added:
+        if (final / rel).exists():
+            raise DatasetWriteError(f"{final / rel} exists already; the dataset changed during the append")
+    journal = Journal("append", build.name, tuple(added), info_sha256=file_sha256(build / INFO_PATH))
+    write_journal(LocalFileSystem(), str(final), journal)
+    reached("local.append.journaled")
+    for n, rel in enumerate(added):
+        _move_in(build / rel, final / rel)
+        if n == 0:
+            reached("local.append.moving")
+    reached("local.append.moved")
+    _replace(build / "meta", final / "meta", f".meta.old-{uuid.uuid4().hex[:8]}")
+    reached("local.append.committed")
+    shutil.rmtree(build / "meta", ignore_errors=True)
+    reached("local.append.cleaned")
+    remove_journal(LocalFileSystem(), str(final))

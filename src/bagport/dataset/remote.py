@@ -1,26 +1,30 @@
 """Publishing a dataset to an object store (S3 and the like), where there are no renames.
 
-A dataset is always built locally first. Publishing then uploads under a journal
-(:data:`APPEND_JOURNAL_PATH`, written first): it lists every file the publish adds, rewrites or
-removes, and each file about to be rewritten or removed is first copied server-side to a backup
-folder. Uploads go data and videos first (nothing refers to them yet), then ``meta/``, the run
-records next to last and ``info.json`` last; stale files of a replaced dataset are removed after
-that, and the journal and backup last of all. After a crash, :func:`recover_remote_publish` (run
-before any conversion or append into that output) deletes what the publish added and restores the
-backups: the previous version comes back whole (or nothing, for a first write). Readers that list
-the dataset during the upload itself can see a mix of both versions; keep readers off an output
-while it is written, or write each version to a new output.
+A dataset is always built locally first. Publishing (a first write, ``--overwrite`` or an append)
+then goes through the intent record of :mod:`bagport.dataset.journal`, at ``<root>/.bagport-journal.json``:
 
-An append (:func:`append_remote`) builds against a copy of the dataset's ``meta/`` and uploads only
-its new data and video files and the ``meta/`` files that changed: existing data and video files
-are never rewritten.
+1. the record (state ``staged``) lists every file the publish adds or rewrites and every file of
+   the previous version it removes;
+2. the files are uploaded under ``<root>/.bagport-staged-<hex>/`` (not under ``data/`` or
+   ``meta/``: LeRobot never reads them, and the previous version stays whole and readable);
+3. the record flips to ``committing`` (one PUT of one object: the commit point);
+4. ``meta/info.json`` is deleted, the staged files are copied server-side to their keys
+   (``meta/info.json`` last), the previous version's extra files are deleted, then the staged
+   copies and the record.
+
+Recovery (:func:`recover_remote`, run before anything reads or writes the output) drops a
+``staged`` record and its uploads (the previous version was never touched), and finishes a
+``committing`` one (every step is a copy from the staged content or a delete: repeatable).
+A reader therefore sees the previous version, until the commit, then, during the server-side
+copies only (and after a crash there, until the next run or ``bagport repair``), no
+``meta/info.json`` (LeRobot refuses to load: never a mix of versions), then the new version.
+An append uploads only its new data and video files (new keys) and the ``meta/`` files that
+changed: existing data and video files are never rewritten.
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
-import tempfile
 import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -29,62 +33,82 @@ from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
 from bagport.dataset.base import DatasetBase, read_base
-from bagport.dataset.layout import APPEND_BACKUP_DIR, APPEND_JOURNAL_PATH, INFO_PATH
+from bagport.dataset.crashpoints import reached
+from bagport.dataset.journal import Journal, file_sha256, read_journal, remove_journal, write_journal
+from bagport.dataset.layout import INFO_PATH, STAGED_DIR
 from bagport.dataset.meta import DatasetLimits
 from bagport.errors import DatasetWriteError
 
-__all__ = ["append_remote", "publish_remote", "recover_remote_publish"]
+__all__ = ["append_remote", "publish_remote", "recover_remote"]
 
 
-def recover_remote_publish(output: str) -> bool:
-    """Undo a publish to ``output`` that did not complete; ``True`` if there was one."""
-    fs, root = url_to_fs(output)
-    root = root.rstrip("/")
-    journal_path = f"{root}/{APPEND_JOURNAL_PATH}"
-    if not fs.exists(journal_path):
-        return False
-    with fs.open(journal_path, "r", encoding="utf-8") as handle:
-        journal = json.load(handle)
-    for rel in journal["added"]:
+def _roll_forward(fs: AbstractFileSystem, root: str, journal: Journal) -> None:
+    staged = f"{root}/{journal.staged}"
+    if fs.exists(f"{root}/{INFO_PATH}") and fs.exists(f"{staged}/{INFO_PATH}"):
+        fs.rm(f"{root}/{INFO_PATH}")  # from here to the end, readers find no dataset rather than a mix
+    reached("s3.retracted")
+    for n, rel in enumerate(rel for rel in journal.files if rel != INFO_PATH):
+        if fs.exists(f"{staged}/{rel}"):  # else copied already (staged copies go only after the last copy)
+            fs.copy(f"{staged}/{rel}", f"{root}/{rel}")
+        if n == 0:
+            reached("s3.copying")
+    reached("s3.copied")
+    for rel in journal.remove:
         if fs.exists(f"{root}/{rel}"):
             fs.rm(f"{root}/{rel}")
-    backup = f"{root}/{journal['backup']}"
-    for rel in [*journal["rewritten"], *journal["removed"]]:
-        if fs.exists(f"{backup}/{rel}"):  # else the crash came before its upload: the original is intact
-            fs.copy(f"{backup}/{rel}", f"{root}/{rel}")
-    if fs.exists(backup):
-        fs.rm(backup, recursive=True)
-    fs.rm(journal_path)
-    return True
+    reached("s3.removed")
+    if fs.exists(f"{staged}/{INFO_PATH}"):
+        fs.copy(f"{staged}/{INFO_PATH}", f"{root}/{INFO_PATH}")
+    reached("s3.published")
+    if fs.exists(staged):
+        fs.rm(staged, recursive=True)
+    reached("s3.cleaned")
+    remove_journal(fs, root)
 
 
-def publish_remote(local: Path, output: str, upload: Sequence[str], remove: Sequence[str] = ()) -> None:
-    """Upload the files ``upload`` (relative to ``local``) to ``output`` and delete ``remove``, under the
-    journal (see the module docstring)."""
+def recover_remote(output: str) -> list[str]:
+    """Finish or undo a publish to ``output`` that did not complete; what was done (empty: nothing)."""
     fs, root = url_to_fs(output)
     root = root.rstrip("/")
-    existing = {path[len(root) + 1 :] for path in fs.find(root)} if fs.exists(root) else set()
-    rewritten = [rel for rel in upload if rel in existing]
-    backup = APPEND_BACKUP_DIR.format(run_id=uuid.uuid4().hex[:8])
-    journal = {
-        "backup": backup,
-        "added": [rel for rel in upload if rel not in existing],
-        "rewritten": rewritten,
-        "removed": list(remove),
-    }
-    fs.pipe_file(f"{root}/{APPEND_JOURNAL_PATH}", json.dumps(journal).encode())
-    for rel in [*rewritten, *remove]:
-        fs.copy(f"{root}/{rel}", f"{root}/{backup}/{rel}")
-    last = [rel for rel in upload if rel.startswith("meta/provenance/run")] + [INFO_PATH]
-    first = [rel for rel in upload if not rel.startswith("meta/")]
-    middle = [rel for rel in upload if rel.startswith("meta/") and rel not in last]
-    for rel in [*first, *middle, *(rel for rel in last if rel in upload)]:
-        _upload(fs, local / rel, f"{root}/{rel}")
-    for rel in remove:
-        fs.rm(f"{root}/{rel}")
-    fs.rm(f"{root}/{APPEND_JOURNAL_PATH}")
-    if fs.exists(f"{root}/{backup}"):
-        fs.rm(f"{root}/{backup}", recursive=True)
+    fs.invalidate_cache()
+    journal = read_journal(fs, root)
+    if journal is None:
+        return []
+    if journal.state == "committing":
+        _roll_forward(fs, root, journal)
+        return [f"finished a {journal.op} into {output} that was committed ({len(journal.files)} file(s))"]
+    if fs.exists(f"{root}/{journal.staged}"):
+        fs.rm(f"{root}/{journal.staged}", recursive=True)
+    remove_journal(fs, root)
+    return [f"dropped a {journal.op} into {output} that was not committed; the previous version is unchanged"]
+
+
+def publish_remote(
+    local: Path, output: str, upload: Sequence[str], remove: Sequence[str] = (), *, append: bool = False
+) -> None:
+    """Upload the files ``upload`` (relative to ``local``) to ``output`` and delete ``remove``, under the
+    intent record (see the module docstring)."""
+    fs, root = url_to_fs(output)
+    root = root.rstrip("/")
+    reached("s3.built")
+    ordered = [rel for rel in upload if rel != INFO_PATH] + [INFO_PATH]
+    journal = Journal(
+        op="append" if append else "publish",
+        staged=STAGED_DIR.format(run_id=uuid.uuid4().hex[:8]),
+        files=tuple(ordered),
+        remove=tuple(remove),
+        info_sha256=file_sha256(local / INFO_PATH),
+    )
+    write_journal(fs, root, journal)
+    reached("s3.journaled")
+    for n, rel in enumerate(ordered):
+        _upload(fs, local / rel, f"{root}/{journal.staged}/{rel}")
+        if n == 0:
+            reached("s3.staging")
+    reached("s3.staged")
+    write_journal(fs, root, journal.committing())
+    reached("s3.committing")
+    _roll_forward(fs, root, journal)
 
 
 def _sha256(path: Path) -> str:
@@ -112,26 +136,27 @@ def _download_meta(fs: AbstractFileSystem, root: str, local: Path) -> dict[str, 
     return digests
 
 
-def append_remote[Report](output: str, build: Callable[[Path, DatasetBase, DatasetLimits], Report]) -> Report:
+def append_remote[Report](
+    output: str, build: Callable[[Path, DatasetBase, DatasetLimits], Report], scratch: Path
+) -> Report:
     """Append to the dataset at ``output``: ``build(root, base, limits)`` writes the new episodes'
-    files and the new ``meta/`` under a local ``root`` that holds a copy of the dataset's ``meta/``."""
+    files and the new ``meta/`` under a local ``root`` (in ``scratch``) holding a copy of its ``meta/``."""
     fs, root = url_to_fs(output)
     root = root.rstrip("/")
-    recover_remote_publish(output)
+    recover_remote(output)
     base = read_base(output)
-    with tempfile.TemporaryDirectory(prefix="bagport-append-") as tmp:
-        local = Path(tmp) / "dataset"
-        before = _download_meta(fs, root, local)
-        report = build(local, base, DatasetLimits.from_info(base.info))
-        added = _files(local, "data") + _files(local, "videos")
-        for rel in added:
-            if fs.exists(f"{root}/{rel}"):
-                raise DatasetWriteError(
-                    f"{output}/{rel} exists already: the dataset changed during the append; nothing was written. "
-                    "Fix: run the append again (one append at a time per dataset)."
-                )
-        changed = [rel for rel in _files(local, "meta") if before.get(rel) != _sha256(local / rel)]
-        publish_remote(local, output, added + changed)
+    local = scratch / "dataset"
+    before = _download_meta(fs, root, local)
+    report = build(local, base, DatasetLimits.from_info(base.info))
+    added = _files(local, "data") + _files(local, "videos")
+    for rel in added:
+        if fs.exists(f"{root}/{rel}"):
+            raise DatasetWriteError(
+                f"{output}/{rel} exists already: the dataset changed during the append; nothing was written. "
+                "Fix: run the append again (one append at a time per dataset)."
+            )
+    changed = [rel for rel in _files(local, "meta") if before.get(rel) != _sha256(local / rel)]
+    publish_remote(local, output, added + changed, append=True)
     return report
 
 

@@ -7,7 +7,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from bagport.dataset.checksums import verify_checksums
 from bagport.dataset.invariants import check_invariants
+from bagport.dataset.repair import interrupted_write
 from bagport.errors import ValidationError
 
 __all__ = ["ValidationReport", "validate_dataset", "video_backend"]
@@ -21,6 +23,8 @@ class ValidationReport:
     frames_decoded: int
     video_keys: tuple[str, ...]
     video_backend: str
+    files_checked: int = 0
+    """Files whose SHA-256 matched the run record's (0: the dataset records none)."""
 
 
 def validate_dataset(
@@ -36,7 +40,14 @@ def validate_dataset(
     value samples every n-th frame plus each episode's last frame.
     """
     path = Path(root)
+    interrupted = interrupted_write(path)
+    if interrupted is not None:
+        raise ValidationError(
+            f"{path} needs repair: {interrupted}. Fix: run `bagport repair {path}` (or the same conversion "
+            "again), which finishes or undoes that write."
+        )
     info = check_invariants(path)
+    checked = verify_checksums(path)
     os.environ.setdefault("HF_HUB_OFFLINE", "1")
     try:
         from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - optional, heavy
@@ -72,7 +83,13 @@ def validate_dataset(
         if progress is not None:
             progress(n + 1, len(indices))
     return ValidationReport(
-        str(path), dataset.meta.total_episodes, total, len(indices), video_keys, str(dataset._video_backend)
+        str(path),
+        dataset.meta.total_episodes,
+        total,
+        len(indices),
+        video_keys,
+        str(dataset._video_backend),
+        checked,
     )
 
 

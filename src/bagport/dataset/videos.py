@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -10,6 +9,7 @@ from pathlib import Path
 from fsspec.core import url_to_fs
 
 from bagport.dataset.layout import VIDEO_PATH, next_chunk_file
+from bagport.scratch import scratch_folder
 from bagport.staging import EpisodeSummary
 from bagport.uris import is_local
 from bagport.video import concat_clips
@@ -55,7 +55,7 @@ def write_video_files(
     placements: list[VideoPlacement] = []
     chunk, file = start
     limit = file_size_in_mb * _MB
-    with tempfile.TemporaryDirectory(prefix="bagport-clips-") as tmp:
+    with scratch_folder("clips") as tmp:
         scratch = Path(tmp)
         group: list[Path] = []
         group_bytes = 0

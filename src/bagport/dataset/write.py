@@ -3,9 +3,7 @@
 from __future__ import annotations
 
 import shutil
-import tempfile
-import uuid
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -16,19 +14,22 @@ import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport.dataset.base import DatasetBase, read_base
+from bagport.dataset.checksums import record_checksums
 from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
-from bagport.dataset.provenance import write_provenance
-from bagport.dataset.publish import building_beside, recover_local_publish, swap_into_place
+from bagport.dataset.provenance import run_record_path, write_provenance
+from bagport.dataset.publish import building_beside, commit_append, swap_into_place
 from bagport.dataset.qa import write_qa
-from bagport.dataset.remote import append_remote, publish_remote, recover_remote_publish
+from bagport.dataset.remote import append_remote, publish_remote
+from bagport.dataset.repair import repair_dataset
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
 from bagport.qa import QAEntry
+from bagport.scratch import scratch_folder
 from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
 from bagport.uris import is_local
 
-__all__ = ["DatasetReport", "recover_interrupted_append", "recover_publish", "write_dataset"]
+__all__ = ["DatasetReport", "write_dataset"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -171,6 +172,8 @@ def _build(
         if entries
         else None
     )
+    carried = {} if base is None else base.checksums
+    record_checksums(root, run_record_path(base), carried)
     return DatasetReport(
         str(root),
         first_episode + len(summaries),
@@ -212,127 +215,61 @@ def write_dataset(
 ) -> DatasetReport:
     """Write the dataset at ``output`` (the dataset root).
 
-    Everything is built in a temporary folder beside ``output`` and renamed into
-    place at the end, so a reader never sees a half-written dataset and a failure
-    leaves whatever was at ``output`` untouched; what a killed run leaves beside a local
-    ``output`` is repaired first (:func:`bagport.dataset.publish.recover_local_publish`). With ``append``, the episodes are
-    added to the dataset at ``output`` (created if missing) as new files. On an object
-    store (no renames) the dataset is built locally and published under a journal that
-    the next run rolls back after a crash (:mod:`bagport.dataset.remote`).
+    Whatever a killed run left at ``output`` is repaired first (:mod:`bagport.dataset.repair`). A new
+    dataset is built beside a local ``output`` and put in place by one atomic exchange
+    (:mod:`bagport.dataset.publish`); on an object store it is built locally and published under an
+    intent record (:mod:`bagport.dataset.remote`). With ``append``, the episodes are added to the
+    dataset at ``output`` (created if missing) as new files: old data and video files never change.
     """
     limits = limits or DatasetLimits()
     fs, out_path = url_to_fs(output)
-    local = is_local(fs)
-    recover_publish(output)
+    repair_dataset(output)
+    fs.invalidate_cache()
+
+    def build(root: Path, base: DatasetBase | None = None, limits: DatasetLimits = limits) -> DatasetReport:
+        return _build(root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {}, base)
+
     if append and fs.exists(out_path):
-        if not local:
-
-            def build(root: Path, base: DatasetBase, limits: DatasetLimits) -> DatasetReport:
-                return _build(
-                    root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {}, base
-                )
-
-            report = append_remote(output, build)
+        if not is_local(fs):
+            with scratch_folder("append") as scratch:
+                report = append_remote(output, build, scratch)
             return replace(report, root=output, size_bytes=int(fs.du(out_path)))
-        return _append(Path(out_path), summaries, robot_type, run_record or {}, qa, qa_config or {})
+        return _append(Path(out_path), build)
     if fs.exists(out_path) and not overwrite:
         raise DatasetWriteError(
             f"{output} already exists; nothing was written. Fix: choose a new --output, or pass --overwrite "
             "to replace it (the old dataset is kept until the new one is complete)."
         )
-    if local:
+    if is_local(fs):
         final = Path(out_path)
         with building_beside(final) as build_root:
-            report = _build(build_root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {})
+            report = build(build_root)
             swap_into_place(build_root, final)
     else:
-        build_root = Path(tempfile.mkdtemp(prefix="bagport-dataset-")) / "dataset"
-        build_root.mkdir(parents=True)
-        try:
-            report = _build(build_root, summaries, robot_type, limits, run_record or {}, qa, qa_config or {})
+        with scratch_folder("dataset") as scratch:
+            build_root = scratch / "dataset"
+            build_root.mkdir()
+            report = build(build_root)
             files = sorted(p.relative_to(build_root).as_posix() for p in build_root.rglob("*") if p.is_file())
-            stale = sorted({p[len(out_path.rstrip("/")) + 1 :] for p in fs.find(out_path)} - set(files))
+            existing = {p[len(out_path.rstrip("/")) + 1 :] for p in fs.find(out_path)}
+            stale = sorted(existing - set(files))
             publish_remote(build_root, output, files, stale)
-        finally:
-            shutil.rmtree(build_root.parent, ignore_errors=True)
-    return DatasetReport(
-        output,
-        report.episodes,
-        report.frames,
-        report.tasks,
-        report.video_keys,
-        report.size_bytes,
-        report.duration_s,
-        report.excluded,
-        report.qa,
-        report.qa_report,
-    )
+    return replace(report, root=output)
 
 
-def _append(
-    final: Path,
-    summaries: Sequence[EpisodeSummary],
-    robot_type: str,
-    run_record: dict[str, Any],
-    qa: Sequence[QAEntry],
-    qa_config: dict[str, Any],
-) -> DatasetReport:
-    """Add episodes to the dataset at ``final`` without touching its data and video files.
-
-    New data/video files and a new ``meta/`` are built beside it; the new files are moved in
-    (nothing refers to them yet), then ``meta/`` is swapped by two renames. A failure before the
-    swap removes what was moved; the previous dataset stays valid throughout.
-    """
-    recover_interrupted_append(final)
+def _append(final: Path, build: Callable[[Path, DatasetBase, DatasetLimits], DatasetReport]) -> DatasetReport:
+    """Add episodes to the dataset at ``final`` without touching its data and video files: new files and
+    a new ``meta/`` are built beside it, then committed (:func:`bagport.dataset.publish.commit_append`)."""
     base = read_base(final)
-    limits = DatasetLimits.from_info(base.info)
-    moved: list[Path] = []
     with building_beside(final) as build_root:
-        try:
-            shutil.copytree(final / "meta", build_root / "meta")
-            report = _build(build_root, summaries, robot_type, limits, run_record, qa, qa_config, base)
-            for folder in ("data", "videos"):
-                for item in (
-                    sorted((build_root / folder).rglob("*")) if (build_root / folder).exists() else []
-                ):
-                    if item.is_file():
-                        target = final / item.relative_to(build_root)
-                        if target.exists():
-                            raise DatasetWriteError(
-                                f"{target} exists already; the dataset changed during the append"
-                            )
-                        target.parent.mkdir(parents=True, exist_ok=True)
-                        item.rename(target)
-                        moved.append(target)
-            retired = final / f".meta.old-{uuid.uuid4().hex[:8]}"
-            (final / "meta").rename(retired)
-            (build_root / "meta").rename(final / "meta")
-            shutil.rmtree(retired, ignore_errors=True)
-        except BaseException:
-            for target in moved:
-                target.unlink(missing_ok=True)
-            raise
+        shutil.copytree(final / "meta", build_root / "meta")
+        report = build(build_root, base, DatasetLimits.from_info(base.info))
+        added = [
+            p.relative_to(build_root).as_posix()
+            for folder in ("data", "videos")
+            for p in sorted((build_root / folder).rglob("*"))
+            if p.is_file()
+        ]
+        commit_append(build_root, final, added)
     size = sum(p.stat().st_size for p in final.rglob("*") if p.is_file())
     return replace(report, root=str(final), size_bytes=size)
-
-
-def recover_publish(output: str) -> None:
-    """Undo a crashed publish into ``output``: locally back to the previous dataset
-    (:func:`bagport.dataset.publish.recover_local_publish`), on an object store back to the previous
-    version, or nothing (:func:`bagport.dataset.remote.recover_remote_publish`)."""
-    fs, out_path = url_to_fs(output)
-    if is_local(fs):
-        recover_local_publish(Path(out_path))
-    elif fs.exists(out_path):
-        recover_remote_publish(output)
-
-
-def recover_interrupted_append(final: Path) -> None:
-    """Finish an append that crashed between the two renames of ``meta/``."""
-    if (final / "meta").exists():
-        for stale in final.glob(".meta.old-*"):
-            shutil.rmtree(stale, ignore_errors=True)
-        return
-    retired = sorted(final.glob(".meta.old-*"))
-    if retired:
-        retired[-1].rename(final / "meta")

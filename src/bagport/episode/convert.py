@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import json
 import shutil
-import tempfile
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,7 @@ from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
+from bagport.scratch import scratch_dir
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,
@@ -119,7 +119,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         )
         keys = clip_keys(request, stamp, plan.fps, sources, ticks)
         reused = find_reusable_clips(request, keys)  # cameras this contract change does not touch
-        workdir = Path(tempfile.mkdtemp(prefix="bagport-episode-"))
+        workdir = scratch_dir("episode")
         try:
             qa_config = QAConfig.model_validate(request.qa)
             monitor = ValueMonitor(qa_config.values, plan.fps, int(ticks.size))

@@ -1,5 +1,5 @@
 """--append onto a dataset on S3 (moto's server on loopback, through s3fs): new files only, old ones
-untouched, and a crash while publishing is rolled back to the previous version."""
+untouched, and a crash while publishing leaves readers the previous version until it is rolled back."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import s3fs
 
 import bagport.dataset.remote
 from bagport.config import ConvertConfig
-from bagport.dataset.remote import recover_remote_publish
+from bagport.dataset.remote import recover_remote
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
 from bagport.run import plan_run, reduce_run
@@ -77,7 +77,7 @@ def test_append_on_s3_adds_new_files_and_leaves_old_ones(
         "videos/observation.images.front/chunk-000/file-001.mp4",
         "videos/observation.images.wrist/chunk-000/file-001.mp4",
     ]
-    assert not [rel for rel in after if rel.startswith(".append")]  # no journal or backup left
+    assert not [rel for rel in after if rel.startswith(".bagport")]  # no journal or staged files left
     local = tmp_path / "downloaded"
     s3.get("fleet/appended", str(local), recursive=True)
     report = validate_dataset(local, repo_id="test/s3-append")
@@ -101,12 +101,15 @@ def test_a_crash_while_publishing_on_s3_rolls_back_to_the_previous_version(
     with pytest.raises(KeyboardInterrupt):
         _append(bags, ["a", "b"], "s3://fleet/crashed", tmp_path / "staging")
     crashed = _etags(s3, "fleet/crashed")
-    assert ".append-journal.json" in crashed
-    assert "data/chunk-000/file-001.parquet" in crashed  # uploaded before the crash
+    assert ".bagport-journal.json" in crashed
+    staged = [rel for rel in crashed if rel.endswith("data/chunk-000/file-001.parquet")]
+    assert [rel.split("/")[0][:16] for rel in staged] == [".bagport-staged-"]  # uploaded, but not in data/
+    # what a reader sees (everything but bagport's own hidden keys) is the previous version, byte for byte
+    assert {k: v for k, v in crashed.items() if not k.startswith(".bagport")} == previous
 
     monkeypatch.setattr(bagport.dataset.remote, "_upload", real_upload)
-    assert recover_remote_publish("s3://fleet/crashed")
-    assert _etags(s3, "fleet/crashed") == previous  # the previous version, byte for byte
+    assert recover_remote("s3://fleet/crashed")
+    assert _etags(s3, "fleet/crashed") == previous
     assert _append(bags, ["a", "b"], "s3://fleet/crashed", tmp_path / "staging") == 1
     local = tmp_path / "downloaded"
     s3.get("fleet/crashed", str(local), recursive=True)
@@ -136,13 +139,15 @@ def test_a_crash_while_overwriting_on_s3_rolls_back_and_a_new_write_replaces_sta
     monkeypatch.setattr(bagport.dataset.remote, "_upload", crash_at_info)
     with pytest.raises(KeyboardInterrupt):
         reduce_run(plan, staged)
-    assert _etags(s3, "fleet/overwritten") != previous  # half-replaced, with its journal
+    crashed = _etags(s3, "fleet/overwritten")
+    assert ".bagport-journal.json" in crashed
+    assert {k: v for k, v in crashed.items() if not k.startswith(".bagport")} == previous  # readers: old one
     monkeypatch.setattr(bagport.dataset.remote, "_upload", real_upload)
     plan = plan_run(config)  # planning the next run rolls the crashed one back
     assert _etags(s3, "fleet/overwritten") == previous
     reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
     after = _etags(s3, "fleet/overwritten")
-    assert not [rel for rel in after if rel.startswith(".append")]
+    assert not [rel for rel in after if rel.startswith(".bagport")]
     local = tmp_path / "downloaded"
     s3.get("fleet/overwritten", str(local), recursive=True)
     assert validate_dataset(local, repo_id="test/s3-overwrite").episodes == 1

@@ -1,0 +1,85 @@
+"""SHA-256 of every file a run wrote, kept in its run record, and checked by ``bagport validate``.
+
+The run record (``meta/provenance/run.json``, an append's ``run-NNN.json``) gets ``files``:
+``{relative path: sha256}`` for every file under ``data/``, ``videos/`` and ``meta/`` as the run
+left the dataset, except the record itself. An append hashes what it writes (and the ``meta/``
+it rewrites) and carries over the previous record's digests of the data and video files it never
+touches. The newest record is the one to check: older ones describe ``meta/`` as it was then.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from bagport.dataset.journal import file_sha256
+from bagport.errors import ValidationError
+
+__all__ = ["CHECKED_FOLDERS", "latest_record", "record_checksums", "verify_checksums"]
+
+CHECKED_FOLDERS = ("data", "videos", "meta")
+_RUN = re.compile(r"run(?:-(\d+))?\.json")
+
+
+def latest_record(names: list[str]) -> str | None:
+    """Of run-record paths (``.../run.json``, ``.../run-001.json``...), the newest run's."""
+    numbered = [
+        (int(m.group(1) or 0), name) for name in names if (m := _RUN.fullmatch(name.rsplit("/", 1)[-1]))
+    ]
+    return max(numbered)[1] if numbered else None
+
+
+def _digests(root: Path, skip: str) -> dict[str, str]:
+    return {
+        rel: file_sha256(path)
+        for folder in CHECKED_FOLDERS
+        for path in sorted((root / folder).rglob("*"))
+        if path.is_file() and (rel := path.relative_to(root).as_posix()) != skip
+    }
+
+
+def record_checksums(root: Path, record_rel: str, carried: Mapping[str, str] | None) -> None:
+    """Add ``files`` to the run record at ``root/record_rel``: the digests of everything under ``root``
+    plus ``carried`` (an append's untouched data/video files; ``None`` when the dataset it appends to
+    recorded none, so the list is partial and ``validate`` does not look for files missing from it)."""
+    path = root / record_rel
+    record: dict[str, Any] = json.loads(path.read_text())
+    digests = {**(carried or {}), **_digests(root, record_rel)}
+    record["files"] = dict(sorted(digests.items()))
+    record["files_complete"] = carried is not None
+    path.write_text(json.dumps(record, indent=2, default=str))
+
+
+def verify_checksums(root: Path) -> int:
+    """Check every file against the newest run record's digests; the number checked (0: none recorded).
+
+    Raises :class:`ValidationError` naming the first file that changed, is missing, or (under ``data/``
+    or ``videos/``, which LeRobot reads by listing) is not in the record.
+    """
+    records = [p.relative_to(root).as_posix() for p in (root / "meta/provenance").glob("run*.json")]
+    newest = latest_record(records)
+    if newest is None:
+        return 0
+    record = json.loads((root / newest).read_text())
+    files: dict[str, str] = record.get("files", {})
+    for rel, expected in files.items():
+        path = root / rel
+        if not path.is_file():
+            raise ValidationError(f"{path}: missing, but the run record {newest} lists it")
+        if file_sha256(path) != expected:
+            raise ValidationError(
+                f"{path}: changed since bagport wrote it (its SHA-256 differs from the one in {newest}). "
+                "Fix: restore it from a backup, or convert the bags again."
+            )
+    if files and record.get("files_complete", False):
+        for folder in ("data", "videos"):
+            for path in sorted((root / folder).rglob("*")):
+                if path.is_file() and path.relative_to(root).as_posix() not in files:
+                    raise ValidationError(
+                        f"{path}: not written by bagport (not in the run record {newest}); LeRobot would "
+                        "read it. Fix: remove it, or run `bagport repair` if a run was interrupted."
+                    )
+    return len(files)

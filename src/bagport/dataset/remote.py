@@ -44,12 +44,12 @@ __all__ = ["append_remote", "publish_remote", "recover_remote"]
 
 def _roll_forward(fs: AbstractFileSystem, root: str, journal: Journal) -> None:
     staged = f"{root}/{journal.staged}"
-    if fs.exists(f"{root}/{INFO_PATH}") and fs.exists(f"{staged}/{INFO_PATH}"):
+    waiting = {path[len(staged) + 1 :] for path in fs.find(staged)}  # staged copies go after the last copy
+    if INFO_PATH in waiting and fs.exists(f"{root}/{INFO_PATH}"):
         fs.rm(f"{root}/{INFO_PATH}")  # from here to the end, readers find no dataset rather than a mix
     reached("s3.retracted")
-    for n, rel in enumerate(rel for rel in journal.files if rel != INFO_PATH):
-        if fs.exists(f"{staged}/{rel}"):  # else copied already (staged copies go only after the last copy)
-            fs.copy(f"{staged}/{rel}", f"{root}/{rel}")
+    for n, rel in enumerate(rel for rel in journal.files if rel != INFO_PATH and rel in waiting):
+        fs.copy(f"{staged}/{rel}", f"{root}/{rel}")
         if n == 0:
             reached("s3.copying")
     reached("s3.copied")
@@ -57,10 +57,10 @@ def _roll_forward(fs: AbstractFileSystem, root: str, journal: Journal) -> None:
         if fs.exists(f"{root}/{rel}"):
             fs.rm(f"{root}/{rel}")
     reached("s3.removed")
-    if fs.exists(f"{staged}/{INFO_PATH}"):
+    if INFO_PATH in waiting:
         fs.copy(f"{staged}/{INFO_PATH}", f"{root}/{INFO_PATH}")
     reached("s3.published")
-    if fs.exists(staged):
+    if waiting:
         fs.rm(staged, recursive=True)
     reached("s3.cleaned")
     remove_journal(fs, root)

@@ -139,7 +139,7 @@ def _cases(kind: str) -> list[tuple[str, str]]:
     return publish + [("append", step) for step in STEPS["local.append"]]
 
 
-@pytest.mark.parametrize(("scenario", "step"), _cases("local"), ids=lambda v: str(v))
+@pytest.mark.parametrize(("scenario", "step"), _cases("local"), ids=str)
 def test_a_local_kill_after_each_step_recovers_to_the_uninterrupted_result(
     scenario: str,
     step: str,
@@ -155,7 +155,7 @@ def test_a_local_kill_after_each_step_recovers_to_the_uninterrupted_result(
     _killed_after(step, lambda: _write(staged, scenario, str(out)))
 
     if interrupted_write(out) is not None:
-        with pytest.raises(ValidationError, match="needs repair.*Fix: run `bagport repair"):
+        with pytest.raises(ValidationError, match=r"needs repair.*Fix: run `bagport repair"):
             validate_dataset(out)
     else:  # what a reader sees is the old or the new dataset, whole
         seen = _tree(out) if out.exists() else None
@@ -177,7 +177,7 @@ def s3(s3_env: dict[str, str]) -> s3fs.S3FileSystem:
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize(("scenario", "step"), _cases("s3"), ids=lambda v: str(v))
+@pytest.mark.parametrize(("scenario", "step"), _cases("s3"), ids=str)
 def test_an_s3_kill_after_each_step_leaves_readers_a_whole_version_and_recovers(
     scenario: str,
     step: str,

@@ -16,10 +16,12 @@ from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_se
 from prefect.states import Failed
 from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
 
+from bagport.bags import source_stamp
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.dataset.history import dataset_report
 from bagport.episode import EpisodeRequest
+from bagport.episode.staged import PlannedEpisode, split_staged
 from bagport.errors import BagportError, QualityError
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
@@ -45,12 +47,17 @@ def _label(uri: str) -> str:
 def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
     plan = plan_task(config)
-    if not plan.requests:  # an append or ingestion run with nothing new
+    if not plan.requests and not plan.reused:  # an append or ingestion run with nothing new
         logger.info(
             "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
         )
         return dataset_report(config.output)
     episodes = _Episodes(plan)
+    if plan.reused:
+        logger.info(
+            "%d episode(s) staged already with the same key: not converted again; %d bag(s) to convert",
+            len(plan.reused), len(plan.requests),
+        )  # fmt: skip
     failures: list[EpisodeFailure] = []
     if segments_bags(plan.contract):
         # Each bag's episodes start converting as soon as that bag is split, while the others are.
@@ -90,13 +97,11 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
             )
             logger.error("%s", message)
             return Failed(message=message)
-    staged: list[dict[str, Any]] = []
+    staged = list(episodes.reused)
     for request, future in episodes.in_plan_order():
         state = future.state
         if state.is_completed():
-            result = future.result()
-            assert isinstance(result, dict)  # completed: the task returned its summary
-            staged.append(result)
+            staged.append(PlannedEpisode.of(request))
             continue
         # A bad bag's task ends Failed with bagport's one-paragraph error as its message.
         failures.append(EpisodeFailure.of(request, state.message or str(state.name)))
@@ -122,17 +127,23 @@ class _Episodes:
 
     def __init__(self, plan: RunPlan) -> None:
         self._plan = plan
-        self.progress = Progress(0)
+        self.reused = list(plan.reused)
+        self.progress = Progress(0, len(self.reused))
         self.futures: list[PrefectFuture[Any]] = []
         self._requests: list[EpisodeRequest] = []
         self._order: list[tuple[int, int]] = []
         self._index: dict[int, int] = {}
 
     def submit(self, bag_position: int, requests: list[EpisodeRequest]) -> None:
-        """The episodes of the bag at ``bag_position`` in the plan, in their order inside it."""
-        self.progress.add(len(requests))
+        """The episodes of the bag at ``bag_position`` in the plan, in their order inside it; those
+        staged already with a matching key are reused, not submitted."""
+        split = split_staged(requests, self._plan.staged_ids, source_stamp)
+        self.reused += split.reused
+        self.progress.add(len(split.todo), reused=len(split.reused))
+        todo = {r.episode_id for r in split.todo}
         for i, request in enumerate(requests):
-            self._submit((bag_position, i), request)
+            if request.episode_id in todo:
+                self._submit((bag_position, i), request)
 
     def submit_bags(self, requests: tuple[EpisodeRequest, ...]) -> None:
         """One episode per bag, in plan order."""
@@ -358,6 +369,6 @@ def run_config(config: ConvertConfig) -> DatasetReport:
 def run_convert(config: ConvertConfig) -> DatasetReport:
     """The CLI's entry: check the inputs before Prefect starts, then run against the configured API
     (or one temporary local server)."""
-    plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
+    plan_run(config, reuse=False)  # bad manifests, contracts and outputs fail here, before Prefect starts
     with prefect_api():
         return run_config(config)

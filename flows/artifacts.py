@@ -51,11 +51,14 @@ class Progress:
     def _percent(self) -> float:
         return 100.0 * self._done / max(self._total, 1)
 
-    def advance(self) -> None:
-        self._done += 1
+    def advance(self, episodes: int = 1) -> None:
+        """Episodes finished (several at once from a task run that converted several)."""
+        first = self._done + 1
+        self._done += episodes
         update_progress_artifact(self._id, self._percent(), description=self._text())
-        for listener in LISTENERS:
-            listener(self._done, self._total)
+        for done in range(first, self._done + 1):  # a bar counts bags, one at a time
+            for listener in LISTENERS:
+                listener(done, self._total)
 
 
 def qa_table(report: DatasetReport) -> list[dict[str, Any]]:

@@ -33,7 +33,15 @@ from bagport.staging import QA_FILE, EpisodeSummary, read_summary
 from bagport.uris import is_local, read_text
 from bagport.video import EncoderSettings
 
-__all__ = ["EpisodeFailure", "PlannedEpisode", "RunPlan", "plan_run", "reduce_run", "segment_all", "stage_all"]
+__all__ = [
+    "EpisodeFailure",
+    "PlannedEpisode",
+    "RunPlan",
+    "plan_run",
+    "reduce_run",
+    "segment_all",
+    "stage_all",
+]
 
 
 @dataclass(frozen=True, slots=True)

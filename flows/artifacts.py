@@ -27,31 +27,38 @@ LISTENERS: list[ProgressListener] = []
 
 
 class Progress:
-    """A progress artifact updated as episodes finish."""
+    """A progress artifact updated as episodes finish; episodes reused from the staging store are
+    counted apart (they are done before the run starts)."""
 
-    def __init__(self, total: int) -> None:
+    def __init__(self, total: int, reused: int = 0) -> None:
         self._total = total
+        self._reused = reused
         self._done = 0
         artifact_id = create_progress_artifact(0.0, key="bagport-progress", description=self._text())
         assert isinstance(artifact_id, UUID)  # sync context: Prefect returns the id, not a coroutine
         self._id = artifact_id
 
     def _text(self) -> str:
-        return f"{self._done} of {self._total} episode(s) converted"
+        reused = f"; {self._reused} reused from the staging store" if self._reused else ""
+        return f"{self._done} of {self._total} episode(s) converted{reused}"
 
-    def add(self, episodes: int) -> None:
-        """More episodes to convert (a bag was split into its episodes)."""
+    def add(self, episodes: int, reused: int = 0) -> None:
+        """More episodes to convert (a bag was split into its episodes), and more found staged already."""
         self._total += episodes
+        self._reused += reused
         update_progress_artifact(self._id, self._percent(), description=self._text())
 
     def _percent(self) -> float:
         return 100.0 * self._done / max(self._total, 1)
 
-    def advance(self) -> None:
-        self._done += 1
+    def advance(self, episodes: int = 1) -> None:
+        """Episodes finished (several at once from a task run that converted several)."""
+        first = self._done + 1
+        self._done += episodes
         update_progress_artifact(self._id, self._percent(), description=self._text())
-        for listener in LISTENERS:
-            listener(self._done, self._total)
+        for done in range(first, self._done + 1):  # a bar counts bags, one at a time
+            for listener in LISTENERS:
+                listener(done, self._total)
 
 
 def qa_table(report: DatasetReport) -> list[dict[str, Any]]:
@@ -78,17 +85,27 @@ def _episode_name(row: dict[str, Any]) -> str:
     return name if row.get("segment") is None else f"{name}#{row['segment']}"
 
 
+_LISTED = 200
+"""Reused episodes listed by name in the summary artifact (the run record lists all)."""
+
+
 def _markdown(report: DatasetReport) -> str:
     lines = [
         f"# bagport dataset `{report.root}`",
         "",
         f"- episodes kept: **{report.episodes}**, excluded: **{len(report.excluded)}**",
+        f"- converted by this run: **{report.converted}**, reused from the staging store: **{len(report.reused)}**",
         f"- frames: {report.frames}, duration: {report.duration_s:.1f} s, size: {report.size_bytes / 1e6:.1f} MB",
         f"- tasks: {', '.join(report.tasks)}",
         f"- videos: {', '.join(report.video_keys) or 'none'}",
     ]
     if report.qa_report:
         lines.append(f"- QA report: `{report.root.rstrip('/')}/{report.qa_report}`")
+    if report.reused:
+        lines += ["", "## Reused from the staging store (not converted again)", ""]
+        lines += [f"- `{uri}`" for uri in report.reused[:_LISTED]]
+        if len(report.reused) > _LISTED:
+            lines.append(f"- ... and {len(report.reused) - _LISTED} more (the run record lists every one)")
     if report.excluded:
         lines += ["", "## Excluded", ""]
         lines += [f"- `{_episode_name(row)}` ({row['bag_uri']}): {row['reason']}" for row in report.excluded]

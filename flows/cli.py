@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     import pydantic
 
     from bagport.config import ConvertConfig
+    from bagport.dataset import DatasetReport
 
 __all__ = ["main"]
 
@@ -155,16 +156,28 @@ def _convert(args: argparse.Namespace) -> int:
     for row in report.excluded:
         where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
         print(f"excluded bags[{row['manifest_entry']}] {where}: {row['reason']}", file=sys.stderr)
-    qa_report = f"; QA report: {report.root.rstrip('/')}/{report.qa_report}" if report.qa_report else ""
-    print(
-        # an append reports the whole dataset, not only the episodes it added
-        f"{'the dataset now holds' if args.append else 'converted'} {report.duration_s:.1f} s of recordings "
-        f"({report.episodes} episode(s), "
-        f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time{qa_report}",
-        file=sys.stderr,
-    )
+    print(_summary_line(report, args.append, wall_s), file=sys.stderr)
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
     return 1 if any(not row.get("excluded_by_label") for row in report.excluded) else 0
+
+
+def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
+    """One line: what the run converted, reused and left out, or that it had nothing to do."""
+    if append and not report.converted and not report.reused:
+        return (
+            f"nothing to do: every bag is in {report.root} already ({report.episodes} episode(s), "
+            f"{report.duration_s:.1f} s of recordings); checked in {wall_s:.1f} s"
+        )
+    qa_report = f"; QA report: {report.root.rstrip('/')}/{report.qa_report}" if report.qa_report else ""
+    work = f"{report.converted} converted, {len(report.reused)} reused from the staging store"
+    if report.reused and not report.converted:
+        work = f"nothing converted: all {len(report.reused)} reused from the staging store"
+    # an append reports the whole dataset, not only the episodes it added
+    return (
+        f"{'the dataset now holds' if append else 'wrote'} {report.duration_s:.1f} s of recordings "
+        f"({report.episodes} episode(s), {len(report.excluded)} excluded; {work}) in {wall_s:.1f} s wall time"
+        f"{qa_report}"
+    )
 
 
 def _cmd_qa(args: argparse.Namespace) -> int:

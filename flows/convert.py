@@ -16,16 +16,18 @@ from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_se
 from prefect.states import Failed
 from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
 
+from bagport.bags import source_stamp
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.dataset.history import dataset_report
 from bagport.episode import EpisodeRequest
+from bagport.episode.staged import PlannedEpisode, split_staged
 from bagport.errors import BagportError, QualityError
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
 from flows.local_server import take_launched
-from tasks.episode import convert_episode_task
+from tasks.episode import convert_batch_task, convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
 from tasks.segment import segment_bag_task
@@ -45,12 +47,17 @@ def _label(uri: str) -> str:
 def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
     plan = plan_task(config)
-    if not plan.requests:  # an append or ingestion run with nothing new
+    if not plan.requests and not plan.reused:  # an append or ingestion run with nothing new
         logger.info(
             "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
         )
         return dataset_report(config.output)
     episodes = _Episodes(plan)
+    if plan.reused:
+        logger.info(
+            "%d episode(s) staged already with the same key: not converted again; %d bag(s) to convert",
+            len(plan.reused), len(plan.requests),
+        )  # fmt: skip
     failures: list[EpisodeFailure] = []
     if segments_bags(plan.contract):
         # Each bag's episodes start converting as soon as that bag is split, while the others are.
@@ -78,33 +85,30 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     unsegmented = len(failures)  # bags that could not even be split into episodes
     for done in as_completed(episodes.futures):
         done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
-        episodes.progress.advance()
-        stop = _fail_fast_reason(plan, episodes.request_of(done), done) if config.fail_fast else None
+        outcomes = episodes.outcomes(done)
+        episodes.progress.advance(len(outcomes))
+        stop = _fail_fast_reason(plan, outcomes) if config.fail_fast else None
         if stop is not None:
-            unfinished = _cancel_unfinished(episodes.futures)
+            unfinished = episodes.cancel_unfinished()
             message = (
-                f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {len(episodes.futures)} "
+                f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {episodes.count} "
                 f"episode(s) were not finished) and nothing was written at {config.output}. Finished episodes "
                 f"stay in the staging store {config.resolved_staging()} and a re-run reuses them. Fix: correct "
                 "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
             )
             logger.error("%s", message)
             return Failed(message=message)
-    staged: list[dict[str, Any]] = []
-    for request, future in episodes.in_plan_order():
-        state = future.state
-        if state.is_completed():
-            result = future.result()
-            assert isinstance(result, dict)  # completed: the task returned its summary
-            staged.append(result)
-            continue
-        # A bad bag's task ends Failed with bagport's one-paragraph error as its message.
-        failures.append(EpisodeFailure.of(request, state.message or str(state.name)))
+    staged = list(episodes.reused)
+    for request, error in episodes.in_plan_order():
+        if error is None:
+            staged.append(PlannedEpisode.of(request))
+        else:  # bagport's one-paragraph error (a bad bag's task ends Failed with it as its message)
+            failures.append(EpisodeFailure.of(request, error))
     if failures:
         logger.warning(
             "%d of %d episode(s) failed; the QA policy (on_fail: %s) decides what happens to the run:\n%s",
             len(failures),
-            len(episodes.futures) + unsegmented,
+            episodes.count + unsegmented,
             plan.qa.on_fail,
             "\n".join(f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures),
         )
@@ -118,44 +122,99 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
 
 
 class _Episodes:
-    """The conversion tasks submitted so far, with their requests and place in the plan."""
+    """The conversion tasks submitted so far, with their requests and place in the plan.
+
+    Small episodes of many go several to a task run (:func:`batch_size`): Prefect's cost per task
+    run (creating it, state changes, dispatch to the pool) is larger than a one-second episode's
+    conversion. Each bag still logs under its own name, counts on the progress bar and fails alone.
+    """
 
     def __init__(self, plan: RunPlan) -> None:
         self._plan = plan
-        self.progress = Progress(0)
+        self.reused = list(plan.reused)
+        self.progress = Progress(0, len(self.reused))
         self.futures: list[PrefectFuture[Any]] = []
-        self._requests: list[EpisodeRequest] = []
-        self._order: list[tuple[int, int]] = []
+        self._batches: list[list[tuple[tuple[int, int], EpisodeRequest]]] = []
         self._index: dict[int, int] = {}
 
+    @property
+    def count(self) -> int:
+        """Episodes submitted."""
+        return sum(len(batch) for batch in self._batches)
+
     def submit(self, bag_position: int, requests: list[EpisodeRequest]) -> None:
-        """The episodes of the bag at ``bag_position`` in the plan, in their order inside it."""
-        self.progress.add(len(requests))
+        """The episodes of the bag at ``bag_position`` in the plan, in their order inside it; those
+        staged already with a matching key are reused, not submitted."""
+        split = split_staged(requests, self._plan.staged_ids, source_stamp)
+        self.reused += split.reused
+        self.progress.add(len(split.todo), reused=len(split.reused))
+        todo = {r.episode_id for r in split.todo}
         for i, request in enumerate(requests):
-            self._submit((bag_position, i), request)
+            if request.episode_id in todo:
+                self._submit([((bag_position, i), request)])
 
     def submit_bags(self, requests: tuple[EpisodeRequest, ...]) -> None:
-        """One episode per bag, in plan order."""
+        """One episode per bag, in plan order, :func:`batch_size` bags to a task run."""
         self.progress.add(len(requests))
-        for i, request in enumerate(requests):
-            self._submit((i, 0), request)
+        size = batch_size(len(requests), self._plan.config.workers or os.cpu_count() or 1)
+        for start in range(0, len(requests), size):
+            self._submit([((i, 0), requests[i]) for i in range(start, min(start + size, len(requests)))])
 
-    def _submit(self, place: tuple[int, int], request: EpisodeRequest) -> None:
+    def _submit(self, batch: list[tuple[tuple[int, int], EpisodeRequest]]) -> None:
+        requests = [request for _, request in batch]
         # Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
-        with tags(f"robot:{self._plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
-            future = convert_episode_task.submit(request.to_dict(), label=request.name)
+        bag_tags = dict.fromkeys(f"bag:{_label(r.bag_uri)}" for r in requests)
+        future: PrefectFuture[Any]
+        with tags(f"robot:{self._plan.contract.robot_type}", *bag_tags):
+            if len(requests) == 1:
+                future = convert_episode_task.submit(requests[0].to_dict(), label=requests[0].name)
+            else:
+                future = convert_batch_task.submit(
+                    [r.to_dict() for r in requests],
+                    labels=[r.name for r in requests],
+                    label=f"{requests[0].name} +{len(requests) - 1}",
+                )
         self._index[id(future)] = len(self.futures)
         self.futures.append(future)
-        self._requests.append(request)
-        self._order.append(place)
+        self._batches.append(batch)
 
-    def request_of(self, future: PrefectFuture[Any]) -> EpisodeRequest:
-        return self._requests[self._index[id(future)]]
+    def outcomes(self, future: PrefectFuture[Any]) -> list[tuple[EpisodeRequest, str | None, str | None]]:
+        """(request, error or ``None``, QA verdict) of each episode of a finished task run."""
+        batch = [request for _, request in self._batches[self._index[id(future)]]]
+        state = future.state
+        if not state.is_completed():
+            return [(request, state.message or str(state.name), None) for request in batch]
+        result = future.result()
+        items = result if isinstance(result, list) else [result]
+        return [(r, item.get("error"), item.get("qa_verdict")) for r, item in zip(batch, items, strict=True)]
 
-    def in_plan_order(self) -> list[tuple[EpisodeRequest, PrefectFuture[Any]]]:
-        """Episodes in manifest order, then in their order inside the bag (not in finishing order)."""
-        ranked = sorted(range(len(self.futures)), key=self._order.__getitem__)
-        return [(self._requests[i], self.futures[i]) for i in ranked]
+    def in_plan_order(self) -> list[tuple[EpisodeRequest, str | None]]:
+        """Episodes in manifest order, then in their order inside the bag (not in finishing order),
+        each with its error (``None``: staged)."""
+        rows = [
+            (place, request, error)
+            for future, batch in zip(self.futures, self._batches, strict=True)
+            for (place, _), (request, error, _) in zip(batch, self.outcomes(future), strict=True)
+        ]
+        rows.sort(key=lambda row: row[0])
+        return [(request, error) for _, request, error in rows]
+
+    def cancel_unfinished(self) -> int:
+        """Cancel the task runs not finished yet; how many episodes they held."""
+        return sum(
+            len(batch) * _cancel_unfinished([future])
+            for future, batch in zip(self.futures, self._batches, strict=True)
+        )
+
+
+MAX_BATCH = 16
+"""At most this many episodes in one task run."""
+
+
+def batch_size(episodes: int, workers: int) -> int:
+    """Episodes per task run: one while there are fewer than 16 per worker (every bag its own task run,
+    the pool balanced), then more, up to :data:`MAX_BATCH`, keeping at least 8 task runs per worker."""
+    return max(1, min(MAX_BATCH, episodes // (8 * workers)))
 
 
 def _submit_segment(plan: RunPlan, request: EpisodeRequest) -> PrefectFuture[Any]:
@@ -178,16 +237,17 @@ def _segments_of(
     return [EpisodeRequest(**item) for item in result["requests"]], None
 
 
-def _fail_fast_reason(plan: RunPlan, request: EpisodeRequest, future: PrefectFuture[Any]) -> str | None:
-    """Why ``--fail-fast`` stops the run after this episode: its conversion failed, or it failed QA
+def _fail_fast_reason(
+    plan: RunPlan, outcomes: list[tuple[EpisodeRequest, str | None, str | None]]
+) -> str | None:
+    """Why ``--fail-fast`` stops the run after these episodes: a conversion failed, or one failed QA
     under ``fail_run`` (the run fails anyway); ``None`` to go on."""
-    where = f"bags[{request.manifest_entry}] {request.bag_uri} {QualityError.MARKER}"
-    state = future.state
-    if not state.is_completed():
-        return f"{where} ({state.message or state.name})"
-    result = future.result()
-    if plan.qa.on_fail == "fail_run" and isinstance(result, dict) and result.get("qa_verdict") == "fail":
-        return f"{where} (QA verdict fail, on_fail is 'fail_run')"
+    for request, error, verdict in outcomes:
+        where = f"bags[{request.manifest_entry}] {request.bag_uri} {QualityError.MARKER}"
+        if error is not None:
+            return f"{where} ({error})"
+        if plan.qa.on_fail == "fail_run" and verdict == "fail":
+            return f"{where} (QA verdict fail, on_fail is 'fail_run')"
     return None
 
 
@@ -358,6 +418,6 @@ def run_config(config: ConvertConfig) -> DatasetReport:
 def run_convert(config: ConvertConfig) -> DatasetReport:
     """The CLI's entry: check the inputs before Prefect starts, then run against the configured API
     (or one temporary local server)."""
-    plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
+    plan_run(config, reuse=False)  # bad manifests, contracts and outputs fail here, before Prefect starts
     with prefect_api():
         return run_config(config)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import time
 from typing import Any
 
 from prefect import Task, get_run_logger, task
@@ -10,8 +11,12 @@ from prefect.states import Failed
 
 from bagport.episode import EpisodeRequest, convert_episode
 from bagport.errors import BagportError, TransientError
+from bagport.staging import EpisodeSummary
 
-__all__ = ["convert_episode_task", "retry_only_transient"]
+__all__ = ["BATCH_RETRY_DELAYS_S", "convert_batch_task", "convert_episode_task", "retry_only_transient"]
+
+BATCH_RETRY_DELAYS_S = (2, 10)
+"""A bag of a batch is retried on a transient I/O error, after these delays (as a task run is)."""
 
 
 def retry_only_transient(_task: Task[Any, Any], _run: TaskRun, state: State[Any]) -> bool:
@@ -47,6 +52,11 @@ def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any] 
     except BagportError as err:
         get_run_logger().error("%s: %s", label, err)
         return Failed(message=str(err))
+    return _staged(label, summary)
+
+
+def _staged(label: str, summary: EpisodeSummary) -> dict[str, Any]:
+    """Log a staged episode under its bag's label; the small result the flow gets."""
     read = summary.bag_read
     get_run_logger().info(
         "%s: %d frames staged at %s (bag %s, %s bytes read)",
@@ -62,3 +72,38 @@ def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any] 
         "tasks": list(summary.tasks),
         "qa_verdict": summary.qa.get("verdict"),
     }
+
+
+@task(
+    name="convert-episodes",
+    task_run_name="convert {label}",
+    tags=["bagport", "episode"],
+)
+def convert_batch_task(
+    requests: list[dict[str, Any]], labels: list[str], label: str  # noqa: ARG001 - names the task run
+) -> list[dict[str, Any]]:
+    """Convert small episodes one after another in one task run (Prefect's cost per task run is
+    larger than such an episode's). Each bag keeps its own log lines (prefixed by its label) and its
+    own outcome: a staged-episode result, or ``{"error": <bagport's one-paragraph error>}``; a
+    transient I/O error is retried for that bag alone (:data:`BATCH_RETRY_DELAYS_S`)."""
+    return [
+        _convert_retrying(EpisodeRequest(**request), name)
+        for request, name in zip(requests, labels, strict=True)
+    ]
+
+
+def _convert_retrying(request: EpisodeRequest, label: str) -> dict[str, Any]:
+    logger = get_run_logger()
+    for delay_s in (*BATCH_RETRY_DELAYS_S, None):
+        try:
+            return _staged(label, convert_episode(request))
+        except TransientError as err:
+            if delay_s is None:
+                logger.error("%s: %s", label, err)
+                return {"error": str(err)}
+            logger.warning("%s: %s; retrying in %d s", label, err, delay_s)
+            time.sleep(delay_s)
+        except BagportError as err:
+            logger.error("%s: %s", label, err)
+            return {"error": str(err)}
+    raise AssertionError("unreachable: the last attempt returns")

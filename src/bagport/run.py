@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -22,7 +22,8 @@ from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.history import converted_bags
 from bagport.dataset.repair import repair_dataset
-from bagport.episode import EpisodeRequest, episode_id_for
+from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
@@ -31,7 +32,15 @@ from bagport.staging import QA_FILE, EpisodeSummary, read_summary
 from bagport.uris import read_text
 from bagport.video import EncoderSettings
 
-__all__ = ["EpisodeFailure", "RunPlan", "plan_run", "reduce_run", "segment_all"]
+__all__ = [
+    "EpisodeFailure",
+    "PlannedEpisode",
+    "RunPlan",
+    "plan_run",
+    "reduce_run",
+    "segment_all",
+    "stage_all",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +51,11 @@ class RunPlan:
     requests: tuple[EpisodeRequest, ...]
     contract_text: str
     qa: QAConfig
+    reused: tuple[PlannedEpisode, ...] = ()
+    """Episodes staged already with a matching key: not converted again (``requests`` holds the rest)."""
+    staged_ids: frozenset[str] = frozenset()
+    """Every completed staged episode when the run was planned (episodes of split bags are matched
+    against it once the bag is split)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -62,11 +76,13 @@ class EpisodeFailure:
         )
 
 
-def plan_run(config: ConvertConfig) -> RunPlan:
+def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     """Validate the manifest, contract and encoder settings; one request per bag.
 
     Everything that can be checked without reading bags is checked here, before
-    any work starts, and the output must not exist unless ``overwrite``.
+    any work starts, and the output must not exist unless ``overwrite``. With ``reuse``, the
+    staging store is listed once and episodes staged already with a matching key go to
+    :attr:`RunPlan.reused` instead of :attr:`RunPlan.requests` (``bagport.episode.staged``).
     """
     contract_text = read_text(config.contract, "contract")
     contract = parse_contract(contract_text, config.contract)
@@ -83,6 +99,13 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     fs, out_path = url_to_fs(config.output)
     repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to
     done: set[tuple[str, str]] = set()
+    stamps: dict[str, str] = {}
+
+    def stamp_of(uri: str) -> str:  # each bag's files are listed at most once per plan
+        if uri not in stamps:
+            stamps[uri] = source_stamp(uri)
+        return stamps[uri]
+
     if config.append and fs.exists(out_path):
         done = converted_bags(config.output)
     elif fs.exists(out_path) and not config.overwrite:
@@ -110,9 +133,23 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             msg_definitions=msg_definitions,
         )
         for bag in manifest.bags
-        if not done or (bag.uri, source_stamp(bag.uri)) not in done
+        if not done or (bag.uri, stamp_of(bag.uri)) not in done
     )
-    return RunPlan(config, contract, manifest, requests, contract_text, qa)
+    plan = RunPlan(config, contract, manifest, requests, contract_text, qa)
+    return _take_staged(plan, stamp_of) if reuse else plan
+
+
+def _take_staged(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
+    """The plan with the episodes staged already (one listing of the staging store) moved to ``reused``.
+
+    Bags the contract splits into episodes are split first (in the flow); their episodes are matched
+    against ``staged_ids`` then.
+    """
+    staged_ids = list_staged(plan.config.resolved_staging()) if plan.requests else frozenset()
+    if not staged_ids or segments_bags(plan.contract):
+        return replace(plan, staged_ids=staged_ids)
+    split = split_staged(plan.requests, staged_ids, stamp_of)
+    return replace(plan, requests=split.todo, reused=split.reused, staged_ids=staged_ids)
 
 
 def window_key(window: dict[str, Any]) -> str:
@@ -136,7 +173,18 @@ def segment_all(plan: RunPlan) -> tuple[tuple[EpisodeRequest, ...], tuple[str, .
     return tuple(requests), tuple(ignored)
 
 
-def run_record(plan: RunPlan) -> dict[str, Any]:
+def stage_all(plan: RunPlan, requests: Sequence[EpisodeRequest] | None = None) -> list[PlannedEpisode]:
+    """Convert the plan's episodes (or ``requests``: a split bag's, from :func:`segment_all`) serially in
+    this process, and return every episode :func:`reduce_run` writes, the reused ones included (the
+    flow maps the conversions as tasks instead)."""
+    todo = plan.requests if requests is None else requests
+    for request in todo:
+        convert_episode(request)
+    return [*plan.reused, *(PlannedEpisode.of(r) for r in todo)]
+
+
+def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str, Any]:
+    reused = [_episode_name(e.bag_uri, e.segment) for e in staged if e.reused]
     return {
         "bagport_version": __version__,
         "repo_id": plan.config.resolved_repo_id(),
@@ -145,7 +193,9 @@ def run_record(plan: RunPlan) -> dict[str, Any]:
             "uri": plan.config.manifest or plan.config.bags_glob,
             "bags": [b.uri for b in plan.manifest.bags],
             "converted_now": [r.bag_uri for r in plan.requests],
+            "reused": reused,
         },
+        "episodes_reused": len(reused),
         "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
         "host_cpus": os.cpu_count(),
     }
@@ -227,25 +277,31 @@ def select_episodes(
     return kept, entries
 
 
+def _episode_name(bag_uri: str, segment: int | None) -> str:
+    return bag_uri if segment is None else f"{bag_uri}#{segment}"
+
+
 def reduce_run(
-    plan: RunPlan, staged_dirs: Sequence[str], failures: Sequence[EpisodeFailure] = ()
+    plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
 ) -> DatasetReport:
-    """Read the staged summaries, apply the QA policy, and write the dataset (manifest order)."""
+    """Read the staged summaries, put on each what the current plan decides about it (manifest entry,
+    metadata, label: never the staged record's, which may come from another manifest), apply the QA
+    policy, and write the dataset in manifest order."""
     summaries: list[EpisodeSummary] = []
-    for uri in staged_dirs:
-        summary = read_summary(uri)
+    for episode in staged:
+        summary = read_summary(episode.dir_uri)
         if summary is None:
             raise DatasetWriteError(
-                f"staged episode {uri} is incomplete (no episode.json); re-run the conversion."
+                f"staged episode {episode.dir_uri} is incomplete (no episode.json); re-run the conversion."
             )
-        summaries.append(summary)
+        summaries.append(episode.apply(summary))
     kept, entries = select_episodes(plan, summaries, failures)
     limits = DatasetLimits(
         chunks_size=plan.config.chunks_size,
         data_files_size_in_mb=plan.config.data_files_size_in_mb,
         video_files_size_in_mb=plan.config.video_files_size_in_mb,
     )
-    record = run_record(plan)
+    record = run_record(plan, staged)
     # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
     record["excluded"] = [
         {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
@@ -262,8 +318,9 @@ def reduce_run(
         append=plan.config.append,
     )
     if not plan.config.keep_staging:
-        _remove_staged(plan, staged_dirs)
-    return report
+        _remove_staged(plan, [e.dir_uri for e in staged])
+    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in staged if e.reused)
+    return replace(report, converted=len(staged) + len(failures) - len(reused), reused=reused)
 
 
 def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:
@@ -293,6 +350,8 @@ def summary_json(report: DatasetReport) -> str:
             "videos": list(report.video_keys),
             "size_bytes": report.size_bytes,
             "excluded": list(report.excluded),
+            "converted_now": report.converted,
+            "reused": len(report.reused),
         },
         indent=2,
     )

@@ -16,7 +16,18 @@ import pydantic
 import yaml
 from pydantic_core import ErrorDetails
 
-__all__ = ["ValidationProblem", "YamlSource", "explain_validation", "load_yaml", "primary_error"]
+__all__ = [
+    "ValidationProblem",
+    "YamlSource",
+    "explain_validation",
+    "load_plain",
+    "load_yaml",
+    "primary_error",
+]
+
+_LOADER: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+"""libyaml's safe loader where PyYAML was built with it (about 10x faster: a tiny episode parsed
+its bag's metadata.yaml and its contract for a fifth of its time), else the pure-Python one."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,9 +65,14 @@ def _child(node: yaml.Node | None, part: int | str) -> tuple[yaml.Node, yaml.Nod
 
 def load_yaml(text: str, name: str) -> YamlSource:
     """Parse ``text``; raises ``yaml.YAMLError`` (with its own mark) on bad syntax."""
-    root = yaml.compose(text, Loader=yaml.SafeLoader)
-    data = yaml.safe_load(text)
+    root = yaml.compose(text, Loader=_LOADER)
+    data = yaml.load(text, Loader=_LOADER)
     return YamlSource(name=name, data=data, root=root)
+
+
+def load_plain(text: str) -> Any:
+    """``yaml.safe_load`` (with libyaml where available)."""
+    return yaml.load(text, Loader=_LOADER)
 
 
 def primary_error(err: pydantic.ValidationError) -> ErrorDetails:

@@ -21,10 +21,9 @@ from bagport.contract.draft import draft_contract
 from bagport.dataset.validate import validate_dataset
 from bagport.decode.defaults import DEFAULT_FIELDS
 from bagport.decode.paths import resolve_path
-from bagport.episode import convert_episode
 from bagport.errors import AlignmentError, ContractError, QualityError
 from bagport.feature_table import describe_features
-from bagport.run import plan_run, reduce_run
+from bagport.run import plan_run, reduce_run, stage_all
 from bagport.video.settings import default_encoder
 from tests.helpers import REPO, realbag
 
@@ -45,7 +44,7 @@ def _convert(
         encoder=default_encoder() if encoder is None else encoder,
     )
     plan = plan_run(config)
-    staged = [convert_episode(request).dir_uri for request in plan.requests]
+    staged = stage_all(plan)
     reduce_run(plan, staged)
 
 

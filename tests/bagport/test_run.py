@@ -11,9 +11,8 @@ import pytest
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
 from bagport.errors import QualityError
-from bagport.run import EpisodeFailure, plan_run, reduce_run
+from bagport.run import EpisodeFailure, plan_run, reduce_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -45,7 +44,7 @@ def _run(fleet: Path, out: Path, **options: object) -> tuple[ConvertConfig, list
         **options,  # type: ignore[arg-type]
     )
     plan = plan_run(config)
-    return config, [convert_episode(r).dir_uri for r in plan.requests]
+    return config, stage_all(plan)
 
 
 def test_failing_episode_is_excluded_and_listed_with_its_reason(fleet: Path, tmp_path: Path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import shutil
 import struct
 from collections.abc import Iterator, Mapping, Sequence
@@ -31,6 +32,7 @@ from bagport.bags.typesources import complete_typestore, parse_msg_definitions, 
 from bagport.errors import BagportError, BagReadError, TransientError
 from bagport.scratch import scratch_dir
 from bagport.uris import is_local
+from bagport.yamlsource import load_plain
 
 __all__ = ["BagReader", "open_bag"]
 
@@ -74,7 +76,7 @@ def _custom_data(path: BagPath) -> dict[str, str]:
     if metadata is None or not metadata.is_file():
         return {}
     try:
-        info = yaml.safe_load(metadata.read_text()) or {}
+        info = load_plain(metadata.read_text()) or {}
         data = info.get("rosbag2_bagfile_information", {}).get("custom_data") or {}
     except (yaml.YAMLError, OSError, AttributeError):
         return {}
@@ -108,7 +110,9 @@ class RosbagsReader:
         try:
             extra = parse_msg_definitions(msg_definitions or {})
             bundled = get_typestore(store)
-            self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled)
+            # the type store is shared by bags with the same definitions, storage and extra types
+            store_key = f"{store}:{json.dumps(sorted((msg_definitions or {}).items()))}"
+            self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled, store_key=store_key)
             self._reader.open()
             msgtypes = {c.msgtype for c in self._reader.connections}
             lacking = complete_typestore(self._reader.typestore, msgtypes, extra, bundled)

@@ -9,12 +9,13 @@ the topic and the reason, and a contract that does not use it never notices.
 
 from __future__ import annotations
 
+import functools
 import re
 from collections.abc import Sequence
 from typing import Any
 
 from rosbags.highlevel import AnyReader, AnyReaderError
-from rosbags.interfaces import Connection, MessageDefinitionFormat
+from rosbags.interfaces import MessageDefinitionFormat
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
@@ -29,10 +30,9 @@ def is_service_event(topic: str, msgtype: str) -> bool:
     return bool(_SERVICE_EVENT.search(topic) or _SERVICE_EVENT.search(msgtype))
 
 
-def _types_of(connection: Connection) -> dict[str, Any]:
-    data = connection.msgdef.data
-    if connection.msgdef.format == MessageDefinitionFormat.MSG:
-        return dict(get_types_from_msg(data, connection.msgtype))
+def _types_of(msgtype: str, definition_format: MessageDefinitionFormat, data: str) -> dict[str, Any]:
+    if definition_format == MessageDefinitionFormat.MSG:
+        return dict(get_types_from_msg(data, msgtype))
     types: dict[str, Any] = {}
     if data.startswith(f"{_IDL_SEPARATOR}IDL: "):
         for block in data.split(_IDL_SEPARATOR)[1:]:
@@ -45,9 +45,12 @@ def _types_of(connection: Connection) -> dict[str, Any]:
 class TolerantAnyReader(AnyReader):
     """``AnyReader`` whose ``unloadable`` maps each type it could not load to the reason."""
 
-    def __init__(self, paths: Sequence[Any], *, default_typestore: Any = None) -> None:
+    def __init__(self, paths: Sequence[Any], *, default_typestore: Any = None, store_key: str = "") -> None:
         super().__init__(paths, default_typestore=default_typestore)
         self.unloadable: dict[str, str] = {}
+        self._store_key = store_key
+        """Whatever else the caller registers in the type store (it is shared between bags whose
+        definitions and key are equal)."""
 
     def _open(self) -> None:
         if self.stack is None:
@@ -55,30 +58,47 @@ class TolerantAnyReader(AnyReader):
         for reader in self.readers:
             self.stack.enter_context(reader)
         connections = [c for reader in self.readers for c in reader.connections]
-        types: dict[str, Any] = {}
-        digests: dict[str, str] = {}
         defined = [c for c in connections if c.msgdef.format != MessageDefinitionFormat.NONE]
-        for connection in defined:
-            try:
-                types.update(_types_of(connection))
-            except (TypesysError, ValueError, KeyError, IndexError) as err:
-                self.unloadable[connection.msgtype] = f"its embedded definition does not parse ({err})"
-                continue
-            if connection.digest:
-                digests[connection.msgtype] = connection.digest
         if not defined and connections:
             if self.default_typestore is None:
                 raise AnyReaderError("Bag contains no type definitions and no default type store was given.")
-            types.update(self.default_typestore.fielddefs)
-        typestore = get_typestore(Stores.EMPTY)
-        typestore.register(types)
-        for msgtype, digest in digests.items():
-            try:
-                have = typestore.hash_rihs01(msgtype) if self.is2 else typestore.generate_msgdef(msgtype)[1]
-            except (TypesysError, ValueError, KeyError) as err:
-                self.unloadable[msgtype] = f"its definition cannot be hashed ({err})"
-                continue
-            if have != digest:
-                self.unloadable[msgtype] = f"its definition hashes to {have}, the bag records {digest}"
+            typestore = get_typestore(Stores.EMPTY)
+            typestore.register(self.default_typestore.fielddefs)
+        else:
+            found = {(c.msgtype, c.msgdef.format, c.msgdef.data, c.digest) for c in defined}
+            key = tuple(sorted(found, key=lambda d: (d[0], str(d[1]), d[2], d[3] or "")))
+            typestore, unloadable = _typestore(key, self.is2, self._store_key)
+            self.unloadable.update(unloadable)
         self.connections = connections
         self.typestore = typestore
+
+
+@functools.lru_cache(maxsize=16)
+def _typestore(
+    definitions: tuple[tuple[str, MessageDefinitionFormat, str, str | None], ...], is2: bool, _store_key: str
+) -> tuple[Any, dict[str, str]]:
+    """A type store of the embedded definitions (``(type, format, text, digest)``), and the types it
+    could not load with the reason. Kept per process: bags of one fleet embed the same definitions,
+    and the store keeps the deserialisers it generates (a tenth of a one-second episode's time)."""
+    types: dict[str, Any] = {}
+    digests: dict[str, str] = {}
+    unloadable: dict[str, str] = {}
+    for msgtype, definition_format, data, digest in definitions:
+        try:
+            types.update(_types_of(msgtype, definition_format, data))
+        except (TypesysError, ValueError, KeyError, IndexError) as err:
+            unloadable[msgtype] = f"its embedded definition does not parse ({err})"
+            continue
+        if digest:
+            digests[msgtype] = digest
+    typestore = get_typestore(Stores.EMPTY)
+    typestore.register(types)
+    for msgtype, digest in digests.items():
+        try:
+            have = typestore.hash_rihs01(msgtype) if is2 else typestore.generate_msgdef(msgtype)[1]
+        except (TypesysError, ValueError, KeyError) as err:
+            unloadable[msgtype] = f"its definition cannot be hashed ({err})"
+            continue
+        if have != digest:
+            unloadable[msgtype] = f"its definition hashes to {have}, the bag records {digest}"
+    return typestore, unloadable

@@ -47,6 +47,10 @@ class DatasetReport:
     """Every bag's QA brief: episode index (None when excluded), score, verdict, reason."""
     qa_report: str | None = None
     """This run's HTML QA report in the dataset (an append's is ``meta/qa/report-NNN.html``)."""
+    converted: int = 0
+    """Episodes this run converted (or tried to); the others came from the staging store as they were."""
+    reused: tuple[str, ...] = ()
+    """Episodes taken from the staging store without converting them again (bag URI, ``#<n>`` for a split bag)."""
 
 
 def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeature, ...]:

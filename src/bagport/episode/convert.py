@@ -24,6 +24,7 @@ from bagport.episode.quality import assess_episode, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
+from bagport.episode.staged import PlannedEpisode, matches
 from bagport.episode.tasks import resolve_tasks
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
@@ -216,34 +217,17 @@ def qa_brief(qa: EpisodeQA) -> dict[str, Any]:
 
 
 def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
-    """A completed staged episode of the same bag files, contract, encoder, task default, QA settings
-    and bagport version.
+    """A completed staged episode with the request's key (:func:`bagport.episode.staged.matches`).
 
-    Re-running a flow after a failure skips the episodes that already finished.
+    The run's plan skips these already (one listing of the staging store); this catches an episode
+    staged since, or a direct library call. The current request's facts are put on it.
     """
     if not stamp:
         return None
     existing = read_summary(episode_dir(request.staging_uri, request.episode_id))
-    if existing is None:
+    if existing is None or not matches(existing, request, stamp):
         return None
-    same = (
-        existing.source_stamp == stamp
-        and existing.bag_uri == request.bag_uri
-        and existing.contract_sha256 == request.contract_sha256
-        and existing.default_task == request.default_task
-        and existing.qa_sha256 == request.qa_sha256
-        and existing.segment == request.segment
-        and existing.bagport_version == __version__  # another bagport may convert differently
-    )
-    if not same:
-        return None
-    return replace(
-        existing,
-        manifest_entry=request.manifest_entry,
-        metadata=dict(request.metadata),
-        label=request.label,
-        note=request.note,
-    )
+    return PlannedEpisode.of(request).apply(existing)
 
 
 def _staged_features(

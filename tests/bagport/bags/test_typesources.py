@@ -19,7 +19,7 @@ from bagport.contract import parse_contract
 from bagport.episode import convert_episode
 from bagport.errors import BagReadError
 from bagport.feature_table import describe_features
-from bagport.run import plan_run, reduce_run
+from bagport.run import plan_run, reduce_run, stage_all
 from bagport.staging import read_summary
 from flows.cli import main
 from tests.bagport.decode.bagwriter import write_bag
@@ -143,7 +143,7 @@ def test_msg_path_defines_it_for_inspect_check_and_convert(
     )
     plan = plan_run(config)
     assert plan.requests[0].msg_definitions == {GRIPPER: GRIPPER_MSG}  # the workers get the text
-    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    reduce_run(plan, stage_all(plan))
     dataset = LeRobotDataset("test/acme", root=tmp_path / "ds")
     got = np.stack([dataset[k]["observation.gripper"].numpy() for k in range(FRAMES)])
     np.testing.assert_array_equal(got, _expected())

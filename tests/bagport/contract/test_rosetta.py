@@ -15,8 +15,7 @@ from rosbags.typesys import Stores, get_typestore
 from bagport.config import ConvertConfig
 from bagport.contract import FeatureKind, parse_contract
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
-from bagport.run import plan_run, reduce_run
+from bagport.run import plan_run, reduce_run, stage_all
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.bagport.decode.bagwriter import Stream, write_bag
 
@@ -225,7 +224,7 @@ def test_rosetta_readme_contract_converts_unchanged(tmp_path: Path) -> None:
         bags_glob=str(bag), contract=str(contract), output=str(tmp_path / "ds"), on_qa_fail="keep"
     )
     plan = plan_run(config)
-    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    reduce_run(plan, stage_all(plan))
     assert validate_dataset(tmp_path / "ds", repo_id="test/rosetta").frames == FRAMES
     dataset = LeRobotDataset("test/rosetta", root=tmp_path / "ds")
     features = dataset.meta.features
@@ -287,7 +286,7 @@ def test_droid_split_sub_keys_and_combined_state(tmp_path: Path) -> None:
         on_qa_fail="keep",
     )
     plan = plan_run(config)
-    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    reduce_run(plan, stage_all(plan))
     dataset = LeRobotDataset("test/droid", root=tmp_path / "ds")
     features = dataset.meta.features
     assert features["observation.state"]["names"] == [f"position.j{i}" for i in range(1, 7)]

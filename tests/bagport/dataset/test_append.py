@@ -12,9 +12,8 @@ import pytest
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
 from bagport.errors import DatasetWriteError
-from bagport.run import plan_run, reduce_run
+from bagport.run import plan_run, reduce_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -49,13 +48,13 @@ def _convert(
         staging=str(out) + ".staging",
     )  # fmt: skip
     plan = plan_run(config)
-    if not plan.requests:
+    if not plan.requests and not plan.reused:
         return 0
-    staged = [convert_episode(r).dir_uri for r in plan.requests]
+    staged = stage_all(plan)
     report = reduce_run(plan, staged)
     if reports is not None:
         reports.append(report)
-    return len(plan.requests)
+    return len(plan.requests) + len(plan.reused)
 
 
 def _files(root: Path) -> dict[str, tuple[int, int, bytes]]:

@@ -13,8 +13,7 @@ import bagport.dataset.remote
 from bagport.config import ConvertConfig
 from bagport.dataset.remote import recover_remote
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
-from bagport.run import plan_run, reduce_run
+from bagport.run import plan_run, reduce_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -52,9 +51,9 @@ def _append(bags: Path, names: list[str], output: str, staging: Path) -> int:
         staging=str(staging),
     )  # fmt: skip
     plan = plan_run(config)
-    if plan.requests:
-        reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
-    return len(plan.requests)
+    if plan.requests or plan.reused:
+        reduce_run(plan, stage_all(plan))
+    return len(plan.requests) + len(plan.reused)
 
 
 def _etags(fs: s3fs.S3FileSystem, root: str) -> dict[str, str]:
@@ -128,7 +127,7 @@ def test_a_crash_while_overwriting_on_s3_rolls_back_and_a_new_write_replaces_sta
         encoder=FAST_CODEC, staging=str(tmp_path / "staging"), overwrite=True,
     )  # fmt: skip
     plan = plan_run(config)
-    staged = [convert_episode(r).dir_uri for r in plan.requests]
+    staged = stage_all(plan)
     real_upload = bagport.dataset.remote._upload
 
     def crash_at_info(fs: Any, local: Path, remote: str) -> None:
@@ -145,7 +144,7 @@ def test_a_crash_while_overwriting_on_s3_rolls_back_and_a_new_write_replaces_sta
     monkeypatch.setattr(bagport.dataset.remote, "_upload", real_upload)
     plan = plan_run(config)  # planning the next run rolls the crashed one back
     assert _etags(s3, "fleet/overwritten") == previous
-    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    reduce_run(plan, stage_all(plan))
     after = _etags(s3, "fleet/overwritten")
     assert not [rel for rel in after if rel.startswith(".bagport")]
     local = tmp_path / "downloaded"

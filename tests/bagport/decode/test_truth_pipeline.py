@@ -14,9 +14,8 @@ from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from bagport.config import ConvertConfig
 from bagport.contract import parse_contract
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
 from bagport.feature_table import describe_features
-from bagport.run import plan_run, reduce_run
+from bagport.run import plan_run, reduce_run, stage_all
 from tests.bagport.decode.bagwriter import Stream, write_bag
 
 pytestmark = pytest.mark.slow
@@ -330,7 +329,7 @@ def _convert(bag: Path, tmp_path: Path, **options: Any) -> Path:
         **options,
     )
     plan = plan_run(config)
-    staged = [convert_episode(request).dir_uri for request in plan.requests]
+    staged = stage_all(plan)
     reduce_run(plan, staged)
     return out
 

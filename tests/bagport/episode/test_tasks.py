@@ -12,7 +12,7 @@ from bagport.episode import convert_episode
 from bagport.episode.tasks import OPERATOR_PROMPT_KEY, resolve_tasks
 from bagport.episode.timeline import TaskMessage
 from bagport.errors import ManifestError
-from bagport.run import plan_run, reduce_run
+from bagport.run import PlannedEpisode, plan_run, reduce_run
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import episode_request
 
@@ -94,7 +94,7 @@ def test_a_prompt_change_mid_episode_switches_the_frames_task_in_lerobot(tmp_pat
     )
     plan = plan_run(config)
     summaries = [convert_episode(r) for r in plan.requests]
-    reduce_run(plan, [s.dir_uri for s in summaries])
+    reduce_run(plan, [PlannedEpisode.of(r) for r in plan.requests])
     dataset = LeRobotDataset("test/tasks", root=tmp_path / "ds")
     assert set(dataset.meta.tasks.index) == {"pick up the red cube", "place it in the bin"}
     first_tick_ns = summaries[0].first_tick_ns

@@ -18,7 +18,7 @@ from bagport.bags import BagReader, open_bag
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
-from bagport.run import plan_run, reduce_run, segment_all
+from bagport.run import plan_run, reduce_run, segment_all, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Window, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -82,7 +82,7 @@ def _convert(root: Path, out: Path, contract: str = "contract.yaml", **options: 
     )
     plan = plan_run(config)
     requests, _ = segment_all(plan)
-    staged = [convert_episode(r).dir_uri for r in requests]
+    staged = stage_all(plan, requests)
     reduce_run(plan, staged)
     return config
 
@@ -163,7 +163,7 @@ def test_manifest_windows_in_seconds_and_ros_time(session: Path, tmp_path: Path)
     )
     plan = plan_run(config)
     assert len({r.episode_id for r in plan.requests}) == 2
-    staged = [convert_episode(r).dir_uri for r in plan.requests]
+    staged = stage_all(plan)
     reduce_run(plan, staged)
     assert validate_dataset(tmp_path / "ds", repo_id="test/windows", decode_every=10).episodes == 2
     run = json.loads((tmp_path / "ds/meta/provenance/run.json").read_text())
@@ -250,7 +250,7 @@ def test_a_resumed_run_reads_only_the_bags_of_episodes_not_staged_yet(
     plan = plan_run(config)  # the resume
     assert segment_all(plan)[0] == requests
     assert opens["bagport.segment.scan"] == 0  # no bag is read to split it again
-    staged = [convert_episode(r).dir_uri for r in requests]
+    staged = stage_all(plan, requests)
     assert opens["bagport.episode.convert"] == 3  # the remaining episodes only
     reduce_run(plan, staged)
     assert validate_dataset(tmp_path / "ds", repo_id="test/resume").episodes == 4

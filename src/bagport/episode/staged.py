@@ -1,0 +1,146 @@
+"""Which episodes a run takes from the staging store as they are, and what the current plan says about them.
+
+A staged episode is reused when its key matches the request: the same bag files (their stamp), contract,
+encoder, window, task default, QA scoring settings, ``--msg-path`` definitions and bagport version
+(:func:`matches`). The plan decides this from **one listing** of the staging store
+(:func:`list_staged`) and reads the summaries of the candidates only, so a re-run submits conversion
+work for the rest alone (:func:`split_staged`).
+
+What the *current* manifest and split decide (the manifest entry, and so the episode order, the
+entry's metadata, the episode's segment, label and note) is never taken from a staged record, which
+may come from a run with another manifest: :class:`PlannedEpisode` carries it from the plan to the
+write and :meth:`PlannedEpisode.apply` puts it on the staged summary there.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from fsspec.core import url_to_fs
+
+from bagport import __version__
+from bagport.episode.request import EpisodeRequest
+from bagport.errors import DatasetWriteError
+from bagport.staging import EPISODE_SUMMARY, EpisodeSummary, episode_dir, staged_path
+
+__all__ = ["PlannedEpisode", "StagedSplit", "list_staged", "matches", "split_staged"]
+
+
+@dataclass(frozen=True, slots=True)
+class PlannedEpisode:
+    """A staged episode as the current plan places it (small: this is what the reduce step receives)."""
+
+    dir_uri: str
+    bag_uri: str
+    manifest_entry: int
+    metadata: dict[str, Any] = field(default_factory=dict)
+    segment: int | None = None
+    label: str | None = None
+    note: str = ""
+    reused: bool = False
+    """Taken from the staging store as it was (no conversion task this run)."""
+
+    @classmethod
+    def of(cls, request: EpisodeRequest) -> PlannedEpisode:
+        """The episode the request stages (its folder is fixed by the staging store and episode id)."""
+        return cls(
+            episode_dir(request.staging_uri, request.episode_id),
+            request.bag_uri,
+            request.manifest_entry,
+            dict(request.metadata),
+            request.segment,
+            request.label,
+            request.note,
+        )
+
+    def apply(self, summary: EpisodeSummary) -> EpisodeSummary:
+        """The staged summary with what the current plan decides in place of what its record says."""
+        if summary.bag_uri != self.bag_uri or summary.segment != self.segment:
+            raise DatasetWriteError(
+                f"staged episode {self.dir_uri} holds {summary.bag_uri} (segment {summary.segment}), the plan "
+                f"expects {self.bag_uri} (segment {self.segment}); nothing was written. Fix: remove that folder "
+                "from the staging store and run again."
+            )
+        return replace(
+            summary,
+            manifest_entry=self.manifest_entry,
+            metadata=dict(self.metadata),
+            label=self.label,
+            note=self.note,
+        )
+
+
+def matches(existing: EpisodeSummary, request: EpisodeRequest, stamp: str) -> bool:
+    """Whether a completed staged episode is what converting ``request`` now would stage.
+
+    ``stamp`` is the bag's current :func:`bagport.bags.source_stamp`; without one (the bag's files
+    could not be listed, so a change could not be seen) nothing is reused.
+    """
+    return bool(stamp) and (
+        existing.source_stamp == stamp
+        and existing.bag_uri == request.bag_uri
+        and existing.contract_sha256 == request.contract_sha256
+        and existing.default_task == request.default_task
+        and existing.qa_sha256 == request.qa_sha256
+        and existing.segment == request.segment
+        and existing.bagport_version == __version__  # another bagport may convert differently
+    )
+
+
+def list_staged(staging_uri: str) -> frozenset[str]:
+    """The ids of every completed staged episode (one listing of the store; ``episode.json`` is written
+    last, so its presence marks completion)."""
+    fs, path = url_to_fs(episode_dir(staging_uri, "*"))
+    try:
+        markers = fs.glob(staged_path(path, EPISODE_SUMMARY))
+    except (FileNotFoundError, NotADirectoryError):
+        return frozenset()
+    return frozenset(str(marker).rstrip("/").rsplit("/", 2)[-2] for marker in markers)
+
+
+@dataclass(frozen=True, slots=True)
+class StagedSplit:
+    todo: tuple[EpisodeRequest, ...]
+    """Episodes to convert, in the order given."""
+    reused: tuple[PlannedEpisode, ...]
+    """Episodes staged already with a matching key, in the order given."""
+
+
+def split_staged(
+    requests: Sequence[EpisodeRequest], staged_ids: frozenset[str], stamp_of: Callable[[str], str]
+) -> StagedSplit:
+    """Split ``requests`` into those to convert and those staged already (``staged_ids``: from
+    :func:`list_staged`). Only candidates cost a stamp (``stamp_of(bag_uri)``) and one summary read
+    (all read together: concurrent requests on an object store)."""
+    candidates = [r for r in requests if r.episode_id in staged_ids]
+    summaries = _read_summaries([episode_dir(r.staging_uri, r.episode_id) for r in candidates])
+    reusable = {
+        r.episode_id
+        for r in candidates
+        if (s := summaries.get(episode_dir(r.staging_uri, r.episode_id))) is not None
+        and matches(s, r, stamp_of(r.bag_uri))
+    }
+    return StagedSplit(
+        tuple(r for r in requests if r.episode_id not in reusable),
+        tuple(replace(PlannedEpisode.of(r), reused=True) for r in requests if r.episode_id in reusable),
+    )
+
+
+def _read_summaries(dir_uris: Sequence[str]) -> dict[str, EpisodeSummary]:
+    """Staged folder -> its summary, for those that hold a readable one."""
+    if not dir_uris:
+        return {}
+    fs, _ = url_to_fs(dir_uris[0])
+    paths = {url_to_fs(staged_path(uri, EPISODE_SUMMARY))[1]: uri for uri in dir_uris}
+    found: dict[str, EpisodeSummary] = {}
+    for path, data in fs.cat(list(paths), on_error="return").items():
+        if isinstance(data, BaseException):
+            continue
+        try:
+            found[paths[path]] = EpisodeSummary.from_dict(json.loads(data))
+        except (ValueError, KeyError, TypeError):
+            continue  # unreadable: converted again, which rewrites it
+    return found

@@ -1,0 +1,187 @@
+"""Re-runs cost only their new work: the plan lists the staging store once and submits conversion tasks
+only for episodes not staged with a matching key; what the current manifest decides (entry, order,
+metadata) is applied when the dataset is written, never taken from a staged episode's record."""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import av
+import pandas as pd
+import pyarrow.parquet as pq
+import pytest
+import yaml
+from prefect.task_runners import ThreadPoolTaskRunner
+
+import flows.convert
+from bagport.config import ConvertConfig
+from bagport.dataset import DatasetReport
+from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from flows.cli import main
+from flows.convert import prefect_api, run_config
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+
+pytestmark = pytest.mark.slow
+
+CAMERAS = (
+    CameraSpec("front", "raw", "bgr8", height=32, width=32),
+    CameraSpec("wrist", "jpeg", height=32, width=32),
+)
+SUBMITTED: list[str] = []
+"""Labels of the conversion tasks submitted to the task runner, in order."""
+
+
+class _CountingRunner(ThreadPoolTaskRunner[Any]):
+    """Prefect's thread-pool runner, recording every conversion task submitted to it."""
+
+    def submit(self, task: Any, parameters: dict[str, Any], *args: Any, **kwargs: Any) -> Any:
+        if task.name == "convert-episode":
+            SUBMITTED.append(str(parameters["label"]))
+        return super().submit(task, parameters, *args, **kwargs)
+
+
+@pytest.fixture(scope="module")
+def prefect() -> Iterator[None]:
+    with prefect_api(), pytest.MonkeyPatch.context() as patch:
+        patch.setattr(flows.convert, "ThreadPoolTaskRunner", _CountingRunner)
+        yield
+
+
+@pytest.fixture(scope="module")
+def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("bags")
+    for i in (4, 5, 7):
+        spec = EpisodeSpec(duration_s=0.6, seed=i, cameras=CAMERAS, task=f"task of bag {i:03d}")
+        write_episode_bag(root / f"bag_{i:03d}", "mcap", spec)
+    return root
+
+
+def _manifest(bags: Path, name: str, entries: list[tuple[int, str]]) -> Path:
+    path = bags / f"{name}.yaml"
+    body = [{"uri": f"bag_{i:03d}", "metadata": {"operator": who}} for i, who in entries]
+    path.write_text(yaml.safe_dump({"bags": body}))
+    return path
+
+
+def _convert(manifest: Path, out: Path, staging: Path, **options: Any) -> tuple[DatasetReport, list[str]]:
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output=str(out), staging=str(staging),
+        encoder=FAST_CODEC, runner="thread", workers=1, keep_staging=True, **options,
+    )  # fmt: skip
+    SUBMITTED.clear()
+    report = run_config(config)
+    return report, list(SUBMITTED)
+
+
+def _rows(files: list[Path]) -> list[dict[str, Any]]:
+    return [row for f in files for row in pq.read_table(f).to_pylist()]
+
+
+def _dataset(root: Path) -> dict[str, Any]:
+    """What must be identical between two writes of the same episodes: data rows, meta, video frames."""
+    frames = {}
+    for video in sorted(root.glob("videos/**/*.mp4")):
+        with av.open(str(video)) as container:
+            frames[video.relative_to(root).as_posix()] = sum(1 for _ in container.decode(video=0))
+    return {
+        "data": _rows(sorted(root.glob("data/*/*.parquet"))),
+        "episodes": _rows(sorted(root.glob("meta/episodes/*/*.parquet"))),
+        "info": json.loads((root / "meta/info.json").read_text()),
+        "stats": json.loads((root / "meta/stats.json").read_text()),
+        "tasks": _rows([root / "meta/tasks.parquet"]),
+        "video_frames": frames,
+    }
+
+
+def _record(root: Path) -> dict[str, Any]:
+    record: dict[str, Any] = json.loads((root / "meta/provenance/run.json").read_text())
+    return record
+
+
+def test_a_rerun_converts_only_what_is_not_staged(prefect: None, bags: Path, tmp_path: Path) -> None:
+    manifest = _manifest(bags, "three", [(4, "alice"), (5, "alice"), (7, "alice")])
+    staging = tmp_path / "staging"
+    first, submitted = _convert(manifest, tmp_path / "first", staging)
+    assert sorted(submitted) == ["bag_004", "bag_005", "bag_007"]
+    assert (first.converted, first.reused) == (3, ())
+
+    # everything staged: no conversion task at all, and the same dataset
+    again, submitted = _convert(manifest, tmp_path / "again", staging)
+    assert submitted == []
+    assert again.converted == 0
+    assert [Path(uri).name for uri in again.reused] == ["bag_004", "bag_005", "bag_007"]
+    assert _dataset(tmp_path / "again") == _dataset(tmp_path / "first")
+    record = _record(tmp_path / "again")
+    assert record["episodes_reused"] == 3
+    assert record["manifest"]["reused"] == [str(bags / f"bag_{i:03d}") for i in (4, 5, 7)]
+
+    # a bag whose files changed converts again, and only that one
+    touched = next((bags / "bag_005").glob("*.mcap"))
+    stat = touched.stat()
+    os.utime(touched, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+    third, submitted = _convert(manifest, tmp_path / "third", staging)
+    assert submitted == ["bag_005"]
+    assert (third.converted, len(third.reused)) == (1, 2)
+    assert _dataset(tmp_path / "third")["data"] == _dataset(tmp_path / "first")["data"]
+
+
+def test_append_of_bags_all_in_the_dataset_submits_nothing_and_exits_0(
+    prefect: None, bags: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    manifest = _manifest(bags, "two", [(4, "alice"), (7, "alice")])
+    out = tmp_path / "ds"
+    _convert(manifest, out, tmp_path / "staging", append=True)
+    before = _dataset(out)
+    SUBMITTED.clear()
+    started = time.perf_counter()
+    code = main([
+        "convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--output", str(out),
+        "--append", "--runner", "thread", "--workers", "1", "--quiet",
+    ])  # fmt: skip
+    elapsed_s = time.perf_counter() - started
+    assert code == 0
+    assert SUBMITTED == []
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1
+    assert lines[0].startswith(f"nothing to do: every bag is in {out} already (2 episode(s)")
+    assert _dataset(out) == before
+    assert elapsed_s < 60  # a generous bound against a hang, not a benchmark (see BENCHMARKS.md W4)
+
+
+def test_reused_episodes_take_the_current_manifests_entry_order_and_metadata(
+    prefect: None, bags: Path, tmp_path: Path
+) -> None:
+    """Issue 19's finding 3: manifest a = [004, 005] with --keep-staging, then b = [007, 004, 005] on
+    the same staging store gave the order 004, 007, 005, and two bags claimed bags[0]."""
+    staging = tmp_path / "staging"
+    _convert(_manifest(bags, "a", [(4, "alice"), (5, "alice")]), tmp_path / "a", staging)
+    report, submitted = _convert(
+        _manifest(bags, "b", [(7, "bob"), (4, "bob"), (5, "carol")]), tmp_path / "b", staging
+    )
+    assert submitted == ["bag_007"]
+    assert [Path(uri).name for uri in report.reused] == ["bag_004", "bag_005"]
+    episodes = _record(tmp_path / "b")["episodes"]
+    assert [(e["episode_index"], Path(e["bag_uri"]).name, e["manifest_entry"]) for e in episodes] == [
+        (0, "bag_007", 0),
+        (1, "bag_004", 1),
+        (2, "bag_005", 2),
+    ]
+    assert [e["metadata"] for e in episodes] == [
+        {"operator": "bob"},
+        {"operator": "bob"},
+        {"operator": "carol"},
+    ]
+    meta = pd.concat([pd.read_parquet(p) for p in sorted((tmp_path / "b").glob("meta/episodes/*/*.parquet"))])
+    assert [list(t) for t in meta["tasks"]] == [["task of bag 007"], ["task of bag 004"], ["task of bag 005"]]
+    assert [e["manifest_entry"] for e in report.qa] == [0, 1, 2]
+    # the rows of episode 1 are bag 004's, as episode 0 of the first dataset
+    data_a = pd.read_parquet(next((tmp_path / "a").glob("data/*/*.parquet")))
+    data_b = pd.concat([pd.read_parquet(p) for p in sorted((tmp_path / "b").glob("data/*/*.parquet"))])
+    state_a = data_a[data_a["episode_index"] == 0]["observation.state"].tolist()
+    state_b = data_b[data_b["episode_index"] == 1]["observation.state"].tolist()
+    assert [list(v) for v in state_b] == [list(v) for v in state_a]

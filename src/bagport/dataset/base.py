@@ -19,6 +19,7 @@ from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
 from bagport.dataset.layout import HISTOGRAMS_PATH, INFO_PATH, STATS_PATH, TASKS_PATH, next_chunk_file
+from bagport.dataset.sketches import DatasetSketches, read_sketches
 from bagport.errors import DatasetWriteError
 from bagport.stats import FeatureStats, stats_from_json
 
@@ -40,7 +41,9 @@ class DatasetBase:
     run_number: int
     """Runs recorded so far (``meta/provenance/run.json`` is run 0, appends add ``run-001.json``...)."""
     data_files: tuple[str, ...] = ()
-    """The existing data files (read, never rewritten: dataset-wide quantiles cover their frames)."""
+    """The existing data files (never rewritten; read only to sketch a dataset that has no sketches yet)."""
+    sketches: DatasetSketches | None = None
+    """The dataset's merged quantile sketches (``None``: written before they were kept)."""
 
     @property
     def episodes(self) -> int:
@@ -103,4 +106,5 @@ def read_base(root: str | Path) -> DatasetBase:
         data_files=tuple(
             fs.unstrip_protocol(p) for p in sorted(fs.glob(f"{path}/data/chunk-*/file-*.parquet"))
         ),
+        sketches=read_sketches(fs, path),
     )

@@ -14,6 +14,7 @@ __all__ = [
     "INFO_PATH",
     "PROVENANCE_PATH",
     "RUN_RECORD_PATH",
+    "SKETCHES_PATH",
     "STATS_PATH",
     "TASKS_PATH",
     "VIDEO_PATH",
@@ -37,6 +38,8 @@ APPEND_JOURNAL_PATH = ".append-journal.json"
 APPEND_BACKUP_DIR = ".append-backup-{run_id}"
 HISTOGRAMS_PATH = "meta/provenance/image_histograms.json"
 """Dataset-wide pixel histograms per camera, so an append merges image stats exactly."""
+SKETCHES_PATH = "meta/provenance/quantile_sketches.json"
+"""Merged KLL sketches per vector feature dimension, so an append merges quantiles without old data."""
 
 DEFAULT_FEATURES: dict[str, dict[str, object]] = {
     "timestamp": {"dtype": "float32", "shape": [1], "names": None},

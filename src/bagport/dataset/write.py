@@ -145,11 +145,7 @@ def _build(
     )
     if base is not None:
         _check_same_features(base, info)
-    data_files: list[str | Path] = [
-        *(base.data_files if base is not None else ()),
-        *sorted(root.glob("data/chunk-*/file-*.parquet")),
-    ]
-    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base, data_files)
+    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base)
     write_provenance(root, summaries, data, run_record, base)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
     total_frames = first_index + new_frames

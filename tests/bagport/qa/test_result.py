@@ -27,8 +27,12 @@ def test_score_orders_by_severity_first(a: list[Verdict], b: list[Verdict]) -> N
 
 def test_a_nan_joint_failure_scores_below_a_warned_episode() -> None:
     # the case that misled a supervisor: 1 hard failure in 50 checks scored 0.98, above a warning's 0.96
-    failed = score_checks(_checks(["fail"] + ["pass"] * 49))
-    warned = score_checks(_checks(["warn"] * 2 + ["pass"] * 23))
+    fail: list[Verdict] = ["fail"]
+    warn: list[Verdict] = ["warn", "warn"]
+    passes: list[Verdict] = ["pass"]
+    failed = score_checks(_checks(fail + passes * 49))
+    warned = score_checks(_checks(warn + passes * 23))
     assert failed[1] == "fail" and warned[1] == "warn"
-    assert failed[0] < 0.4 <= 0.5 <= warned[0] < 0.9
-    assert score_checks(_checks(["pass"] * 3)) == (1.0, "pass")
+    assert failed[0] < 0.4
+    assert 0.5 <= warned[0] < 0.9
+    assert score_checks(_checks(passes * 3)) == (1.0, "pass")

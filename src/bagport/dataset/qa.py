@@ -12,16 +12,29 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from bagport.qa import QAEntry
+from bagport.dataset.meta import EpisodeStats
+from bagport.dataset.sketches import DatasetSketches
+from bagport.qa import QAConfig, QAEntry
+from bagport.qa.jumps import step_outlier_checks
 from bagport.qa.report import render_report
+from bagport.staging import StagedFeature
 
-__all__ = ["QA_REPORT_PATH", "QA_SUMMARY_PATH", "QA_TABLE_PATH", "QAEntry", "qa_rows", "write_qa"]
+__all__ = [
+    "QA_REPORT_PATH",
+    "QA_SUMMARY_PATH",
+    "QA_TABLE_PATH",
+    "QAEntry",
+    "add_fleet_checks",
+    "qa_rows",
+    "write_qa",
+]
 
 QA_TABLE_PATH = "meta/qa/chunk-000/file-000.parquet"
 QA_SUMMARY_PATH = "meta/qa/summary.json"
@@ -40,6 +53,29 @@ _QA_FIELDS: list[tuple[str, pa.DataType]] = [
     ("reason", pa.string()),
 ]
 QA_SCHEMA = pa.schema(_QA_FIELDS)
+
+
+def add_fleet_checks(
+    entries: Sequence[QAEntry],
+    episode_stats: Sequence[EpisodeStats],
+    sketches: DatasetSketches,
+    features: Sequence[StagedFeature],
+    config: dict[str, Any],
+    fps: int,
+) -> list[QAEntry]:
+    """The entries with the checks that need the whole fleet (:mod:`bagport.qa.jumps`) added to each
+    kept episode of this run (``episode_index`` counts this run's kept episodes, as ``episode_stats``)."""
+    values = QAConfig.model_validate(config).values
+    names = {f.key: f.names for f in features}
+    out = []
+    for entry in entries:
+        if entry.episode_index is None:
+            out.append(entry)
+            continue
+        stats = episode_stats[entry.episode_index]
+        extra = step_outlier_checks(stats.largest_steps, sketches.steps, names, values, fps)
+        out.append(replace(entry, qa=entry.qa.with_checks(extra)))
+    return out
 
 
 def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:

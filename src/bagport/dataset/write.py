@@ -20,7 +20,7 @@ from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
 from bagport.dataset.publish import building_beside, recover_local_publish, swap_into_place
-from bagport.dataset.qa import write_qa
+from bagport.dataset.qa import add_fleet_checks, write_qa
 from bagport.dataset.remote import append_remote, publish_remote, recover_remote_publish
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
@@ -145,7 +145,8 @@ def _build(
     )
     if base is not None:
         _check_same_features(base, info)
-    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base)
+    sketches = write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base)
+    qa = add_fleet_checks(qa, episode_stats, sketches, features, qa_config, fps)  # jumps vs the fleet
     write_provenance(root, summaries, data, run_record, base)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
     total_frames = first_index + new_frames

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 from bagport.qa.config import Gate
@@ -92,6 +92,12 @@ class EpisodeQA:
     def failed(cls, bag_uri: str, error: str) -> EpisodeQA:
         check = CheckResult("coverage.convertible", "episode", 1.0, "fail", True, error)
         return cls(bag_uri, 0.0, "fail", [check], error=error)
+
+    def with_checks(self, extra: list[CheckResult]) -> EpisodeQA:
+        """This record with ``extra`` checks added (judged later, e.g. against the fleet), rescored."""
+        checks = [*self.checks, *extra]
+        score, verdict = score_checks(checks)
+        return replace(self, checks=checks, score=score, verdict=verdict)
 
     @property
     def problems(self) -> list[CheckResult]:

@@ -164,7 +164,15 @@ def _build(
         for e in qa
     ]
     qa_report = (
-        write_qa(root, entries, facts, qa_config, base.run_number if base is not None else 0)
+        write_qa(
+            root,
+            entries,
+            facts,
+            qa_config,
+            base.run_number if base is not None else 0,
+            robot_type=robot_type,
+            names={f.key: f.names for f in features},
+        )
         if entries
         else None
     )

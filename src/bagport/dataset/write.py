@@ -45,7 +45,7 @@ class DatasetReport:
     qa: tuple[dict[str, Any], ...] = ()
     """Every bag's QA brief: episode index (None when excluded), score, verdict, reason."""
     qa_report: str | None = None
-    """This run's HTML QA report in the dataset (an append's is ``meta/qa/report-NNN.html``)."""
+    """The HTML QA report in the dataset (``meta/qa/report.html``: every run, rebuilt by each one)."""
 
 
 def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeature, ...]:

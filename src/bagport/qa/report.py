@@ -67,7 +67,7 @@ def render_episode(entry: QAEntry, names: Names | None = None, fps: int | None =
     body = f"<p class='small'>{escape(qa.error)}</p>" if qa.error else ""
     body += _checks_table(entry) + (episode_plots(qa.plots, qa.duration_s, names) if qa.plots else "")
     thumbnails = qa.plots.get("thumbnails", {})
-    if thumbnails:
+    if thumbnails and qa.verdict != "pass":  # a strip per camera where something is to be looked at
         body += "<h3>Cameras</h3>" + thumbnail_strips(thumbnails, fps)
     return body + fidelity_table(qa.plots.get("fidelity", {}))
 

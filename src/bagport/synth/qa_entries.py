@@ -18,9 +18,17 @@ CHECK_NAMES = (
 _DAY_NS = 86_400 * 10**9
 
 
-def synth_qa_entries(count: int, *, seed: int = 0, robots: int = 6, days: int = 30) -> list[QAEntry]:
-    """``count`` episodes of a fleet of ``robots`` over ``days`` days, with 40 checks each: about 85%
-    pass, 12% warn and 3% fail (a hard failure, excluded); bags under ``s3://fleet/<robot>/<day>/``."""
+def synth_qa_entries(
+    count: int,
+    *,
+    seed: int = 0,
+    robots: int = 6,
+    days: int = 30,
+    warn_share: float = 0.12,
+    fail_share: float = 0.03,
+) -> list[QAEntry]:
+    """``count`` episodes of a fleet of ``robots`` over ``days`` days, with 40 checks each: by default about
+    85% pass, 12% warn and 3% fail (a hard failure, excluded); bags under ``s3://fleet/<robot>/<day>/``."""
     rng = np.random.default_rng(seed)
     entries = []
     kept = 0
@@ -28,7 +36,7 @@ def synth_qa_entries(count: int, *, seed: int = 0, robots: int = 6, days: int = 
         robot, day = int(rng.integers(robots)), int(rng.integers(days))
         start_ns = 1_760_000_000 * 10**9 + day * _DAY_NS + int(rng.integers(_DAY_NS))
         roll = rng.random()
-        bad: Verdict = "fail" if roll < 0.03 else "warn" if roll < 0.15 else "pass"
+        bad: Verdict = "fail" if roll < fail_share else "warn" if roll < fail_share + warn_share else "pass"
         picked = set(rng.choice(len(CHECK_NAMES), size=int(rng.integers(1, 3)), replace=False).tolist())
         checks = []
         for i in range(40):

@@ -83,7 +83,7 @@ def index_table(entries: Sequence[QAEntry], run: int, robot_type: str) -> pa.Tab
             **{k: brief[k] for k in brief if k in rows},
             "run": run,
             "position": position,
-            "name": entry.name,
+            "name": entry.name + (f" ({entry.label})" if entry.label else ""),
             "robot_type": robot_type,
             "folder": posixpath.dirname(entry.qa.bag_uri.rstrip("/")) or ".",
             "day": _day(entry),

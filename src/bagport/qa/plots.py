@@ -57,14 +57,16 @@ def line_chart(title: str, series: Mapping[str, Sequence[float]], x_label: str, 
     )
 
 
-def histogram(title: str, edges: Sequence[float], counts: Sequence[int], unit: str = "ms") -> str:
+def histogram(
+    title: str, edges: Sequence[float], counts: Sequence[int], unit: str = "ms", colours: Sequence[str] = ()
+) -> str:
     if not counts:
         return ""
     top = max(*counts, 1)
     width = 300 / len(counts)
     bars = "".join(
         f'<rect x="{40 + i * width:.1f}" y="{115 - c / top * 100:.1f}" width="{width - 1:.1f}" '
-        f'height="{c / top * 100:.1f}" fill="#1f77b4"/>'
+        f'height="{c / top * 100:.1f}" fill="{colours[i] if colours else "#1f77b4"}"/>'
         for i, c in enumerate(counts)
     )
     return (
@@ -80,7 +82,12 @@ def score_histogram(scores: Sequence[float], bins: int = 20) -> str:
     counts = [0] * bins
     for score in scores:
         counts[min(int(score * bins), bins - 1)] += 1
-    return histogram(f"score of {len(scores)} episode(s), {bins} bins", [0.0, 1.0], counts, unit="")
+    colours = [
+        "#c62828" if (i + 1) / bins <= 0.4 else "#b35900" if (i + 1) / bins <= 0.9 else "#1a7f37"
+        for i in range(bins)
+    ]
+    title = f"score of {len(scores)} episode(s): fail < 0.4, warn 0.5-0.9, pass 1"
+    return histogram(title, [0.0, 1.0], counts, unit="", colours=colours)
 
 
 def episode_plots(

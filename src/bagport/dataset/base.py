@@ -20,6 +20,7 @@ from fsspec.core import url_to_fs
 
 from bagport.dataset.checksums import latest_record
 from bagport.dataset.layout import HISTOGRAMS_PATH, INFO_PATH, STATS_PATH, TASKS_PATH, next_chunk_file
+from bagport.dataset.sketches import DatasetSketches, read_sketches
 from bagport.errors import DatasetWriteError
 from bagport.stats import FeatureStats, stats_from_json
 
@@ -41,9 +42,11 @@ class DatasetBase:
     run_number: int
     """Runs recorded so far (``meta/provenance/run.json`` is run 0, appends add ``run-001.json``...)."""
     data_files: tuple[str, ...] = ()
-    """The existing data files (read, never rewritten: dataset-wide quantiles cover their frames)."""
+    """The existing data files (never rewritten; read only to sketch a dataset that has no sketches yet)."""
     checksums: dict[str, str] | None = None
     """SHA-256 of the existing data and video files, from the newest run record (``None``: not recorded)."""
+    sketches: DatasetSketches | None = None
+    """The dataset's merged quantile sketches (``None``: written before they were kept)."""
 
     @property
     def episodes(self) -> int:
@@ -111,4 +114,5 @@ def read_base(root: str | Path) -> DatasetBase:
         checksums=None
         if files is None
         else {rel: digest for rel, digest in files.items() if rel.startswith(("data/", "videos/"))},
+        sketches=read_sketches(fs, path),
     )

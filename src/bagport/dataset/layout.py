@@ -14,6 +14,7 @@ __all__ = [
     "PROVENANCE_PATH",
     "RUN_RECORD_PATH",
     "STAGED_DIR",
+    "SKETCHES_PATH",
     "STATS_PATH",
     "TASKS_PATH",
     "VIDEO_PATH",
@@ -38,6 +39,8 @@ STAGED_DIR = ".bagport-staged-{run_id}"
 """On an object store, where a publish uploads its files before the commit (inside the dataset root)."""
 HISTOGRAMS_PATH = "meta/provenance/image_histograms.json"
 """Dataset-wide pixel histograms per camera, so an append merges image stats exactly."""
+SKETCHES_PATH = "meta/provenance/quantile_sketches.json"
+"""Merged KLL sketches per vector feature dimension, so an append merges quantiles without old data."""
 
 DEFAULT_FEATURES: dict[str, dict[str, object]] = {
     "timestamp": {"dtype": "float32", "shape": [1], "names": None},

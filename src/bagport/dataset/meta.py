@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -28,12 +28,15 @@ from bagport.dataset.layout import (
     STATS_PATH,
     TASKS_PATH,
     VIDEO_PATH,
+    next_chunk_file,
 )
+from bagport.dataset.sketches import DatasetSketches, sketches_from_data_files
 from bagport.dataset.videos import VideoPlacement
-from bagport.staging import STATS_FILE, EpisodeSummary, StagedFeature
+from bagport.staging import FRAMES_FILE, STATS_FILE, EpisodeSummary, StagedFeature
 from bagport.stats import (
     FeatureStats,
-    QuantileHistogram,
+    VectorSketch,
+    episode_sketch_fields,
     merge_feature_stats,
     merge_histograms,
     stats_from_json,
@@ -42,13 +45,17 @@ from bagport.stats import (
 from bagport.video.depth import histogram_levels
 
 __all__ = [
+    "EPISODES_BATCH",
     "DatasetLimits",
     "EpisodeStats",
     "build_info",
-    "dataset_quantiles",
     "load_episode_stats",
+    "write_episode_files",
     "write_meta",
 ]
+
+EPISODES_BATCH = 10
+"""Episode rows written at once (LeRobot buffers as many before writing), between size checks."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -67,10 +74,27 @@ class DatasetLimits:
         )
 
 
+_SKETCH_FIELDS = ("sketch", "step_sketch", "max_step", "max_step_frame")
+
+
 @dataclass(frozen=True, slots=True)
 class EpisodeStats:
     stats: dict[str, FeatureStats]
     histograms: dict[str, npt.NDArray[np.int64]]
+    sketches: DatasetSketches = field(default_factory=DatasetSketches)
+    """Quantile sketches of every non-video feature, step sketches of the staged vector features."""
+    largest_steps: dict[str, tuple[list[float], list[int]]] = field(default_factory=dict)
+    """Per staged vector feature: each dimension's largest frame-to-frame step and the frame it ends at."""
+
+
+def _vector_fields(summary: EpisodeSummary, key: str, values: dict[str, Any]) -> dict[str, Any]:
+    """The sketch fields of a staged vector feature; an episode staged before they were kept is
+    sketched from its staged frames (never from the dataset)."""
+    if all(name in values for name in _SKETCH_FIELDS):
+        return {name: values.pop(name) for name in _SKETCH_FIELDS}
+    fs, path = url_to_fs(summary.file(FRAMES_FILE))
+    with fs.open(path, "rb") as handle:
+        return episode_sketch_fields(column_matrix(pq.read_table(handle, columns=[key]).column(key)))
 
 
 def load_episode_stats(
@@ -81,19 +105,32 @@ def load_episode_stats(
         raw: dict[str, dict[str, Any]] = json.load(handle)
     stats: dict[str, FeatureStats] = {}
     histograms: dict[str, npt.NDArray[np.int64]] = {}
+    sketches = DatasetSketches()
+    largest: dict[str, tuple[list[float], list[int]]] = {}
+    videos = {f.key for f in summary.features if f.video_info is not None}
     for key, values in raw.items():
         hist = values.pop("histogram", None)
         if hist is not None:
             histograms[key] = np.asarray(hist, dtype=np.int64)
+        if key not in videos:
+            fields = _vector_fields(summary, key, values)
+            sketches.values[key] = VectorSketch.from_json(fields["sketch"])
+            sketches.steps[key] = VectorSketch.from_json(fields["step_sketch"])
+            largest[key] = (list(fields["max_step"]), list(fields["max_step_frame"]))
         stats[key] = stats_from_json(values)
     frames = summary.frames
     frame_index = np.arange(frames, dtype=np.int64)
-    stats["timestamp"] = vector_stats((frame_index / summary.fps).astype(np.float32))
-    stats["frame_index"] = vector_stats(frame_index)
-    stats["episode_index"] = vector_stats(np.full(frames, episode_index))
-    stats["index"] = vector_stats(np.arange(placement.from_index, placement.to_index))
-    stats["task_index"] = vector_stats(task_indices)
-    return EpisodeStats(stats, histograms)
+    defaults: dict[str, npt.NDArray[Any]] = {
+        "timestamp": (frame_index / summary.fps).astype(np.float32),
+        "frame_index": frame_index,
+        "episode_index": np.full(frames, episode_index),
+        "index": np.arange(placement.from_index, placement.to_index),
+        "task_index": task_indices,
+    }
+    for key, column in defaults.items():
+        stats[key] = vector_stats(column)
+        sketches.values[key] = VectorSketch.of(column)
+    return EpisodeStats(stats, histograms, sketches, largest)
 
 
 def build_info(
@@ -152,26 +189,6 @@ def _has_label_columns(root: Path) -> bool:
     return not existing or all(name in pq.read_schema(existing[0]).names for name in _LABEL_COLUMNS)
 
 
-def dataset_quantiles(
-    data_files: Sequence[str | Path], merged: dict[str, FeatureStats]
-) -> dict[str, dict[str, npt.NDArray[np.float64]]]:
-    """Quantiles of each vector feature over every frame of ``data_files`` (one streaming pass), between
-    the merged min and max; shaped like the merged stats."""
-    if not merged or not data_files:
-        return {}
-    counters = {key: QuantileHistogram(stats["min"], stats["max"]) for key, stats in merged.items()}
-    for uri in data_files:
-        fs, path = url_to_fs(str(uri))
-        with fs.open(path, "rb") as handle:
-            for batch in pq.ParquetFile(handle).iter_batches(batch_size=65_536, columns=list(counters)):
-                for key, counter in counters.items():
-                    counter.update(column_matrix(batch.column(key)))
-    return {
-        key: {q: value.reshape(np.shape(merged[key]["min"])) for q, value in counter.quantiles().items()}
-        for key, counter in counters.items()
-    }
-
-
 def write_meta(
     root: Path,
     summaries: Sequence[EpisodeSummary],
@@ -182,13 +199,11 @@ def write_meta(
     episode_stats: Sequence[EpisodeStats],
     info: dict[str, Any],
     base: DatasetBase | None = None,
-    data_files: Sequence[str | Path] = (),
-) -> None:
-    """Write ``meta/``; with ``base`` (an append) the new episodes continue the existing ones in a new
-    episodes file, and stats merge with the existing dataset's. ``data_files`` are every data file
-    of the dataset (the base's and the new ones): vector quantiles are computed over all their frames."""
+) -> DatasetSketches:
+    """Write ``meta/``; with ``base`` (an append) the new episodes continue the existing ones in new
+    episodes files, and stats merge with the existing dataset's (its stored sketches, never its data
+    files). Returns the dataset's merged sketches (the fleet distribution the jump check judges by)."""
     first_episode = base.episodes if base is not None else 0
-    episodes_file = base.next_episodes if base is not None else (0, 0)
     (root / "meta").mkdir(parents=True, exist_ok=True)
     (root / INFO_PATH).write_text(json.dumps(info, indent=4))
     task_frame = pd.DataFrame(
@@ -199,9 +214,8 @@ def write_meta(
     stat_keys = [f.key for f in features] + list(DEFAULT_FEATURES)
     rows = []
     for n, (summary, placement, ep_stats) in enumerate(zip(summaries, data, episode_stats, strict=True)):
-        episode_index = first_episode + n
         row: dict[str, Any] = {
-            "episode_index": episode_index,
+            "episode_index": first_episode + n,
             "tasks": list(summary.tasks),
             "length": summary.frames,
             "data/chunk_index": placement.chunk_index,
@@ -218,11 +232,7 @@ def write_meta(
             row[f"videos/{key}/from_timestamp"] = video.from_timestamp_s
             row[f"videos/{key}/to_timestamp"] = video.to_timestamp_s
         row.update(_stat_columns(ep_stats.stats, stat_keys))
-        row["meta/episodes/chunk_index"] = episodes_file[0]
-        row["meta/episodes/file_index"] = episodes_file[1]
         rows.append(row)
-    episodes_path = root / EPISODES_PATH.format(chunk_index=episodes_file[0], file_index=episodes_file[1])
-    episodes_path.parent.mkdir(parents=True, exist_ok=True)
     table = pa.Table.from_pylist(rows)
     for name in _LABEL_COLUMNS:  # typed even when every episode's label is null
         table = table.set_column(
@@ -230,10 +240,35 @@ def write_meta(
         )
     if base is not None and not _has_label_columns(root):
         table = table.drop_columns(list(_LABEL_COLUMNS))  # LeRobot loads episode files of one schema only
-    pq.write_table(table, episodes_path)
+    write_episode_files(
+        root,
+        table,
+        start=base.next_episodes if base is not None else (0, 0),
+        file_size_in_mb=float(info["data_files_size_in_mb"]),
+        chunks_size=int(info["chunks_size"]),
+    )
+    return _write_stats(root, features, stat_keys, episode_stats, base)
 
+
+def _base_sketches(base: DatasetBase, keys: Sequence[str]) -> DatasetSketches:
+    if base.sketches is not None:
+        return base.sketches
+    return sketches_from_data_files(base.data_files, keys)  # once, for a dataset older than its sketches
+
+
+def _write_stats(
+    root: Path,
+    features: Sequence[StagedFeature],
+    stat_keys: Sequence[str],
+    episode_stats: Sequence[EpisodeStats],
+    base: DatasetBase | None,
+) -> DatasetSketches:
+    """``stats.json`` (LeRobot's format), the pixel histograms and the merged sketches."""
+    sketch_keys = [k for k in stat_keys if k in episode_stats[0].sketches.values]
+    sketches = _base_sketches(base, sketch_keys) if base is not None else DatasetSketches()
+    for ep in episode_stats:
+        sketches.merge(ep.sketches)
     merged_stats: dict[str, FeatureStats] = {}
-    quantiles: list[str] = []
     histograms: dict[str, list[int]] = {}
     levels = {f.key: histogram_levels(f.video_info) for f in features if f.video_info is not None}
     for key in stat_keys:
@@ -248,11 +283,10 @@ def write_meta(
             histograms[key] = np.sum(np.stack(hists), axis=0).tolist()
         else:
             value = merge_feature_stats(parts)
-            quantiles.append(key)
+            if key in sketches.values:  # merged sketches, within the bound of bagport.stats.sketch
+                shape = np.shape(value["min"])
+                value.update({q: v.reshape(shape) for q, v in sketches.values[key].quantiles().items()})
         merged_stats[key] = value
-    # vector quantiles over every frame (base and new files), within one bin: see bagport.stats.quantiles
-    for key, values in dataset_quantiles(data_files, {k: merged_stats[k] for k in quantiles}).items():
-        merged_stats[key].update(values)
     merged = {
         key: {stat: np.asarray(v).tolist() for stat, v in value.items()}
         for key, value in merged_stats.items()
@@ -260,3 +294,49 @@ def write_meta(
     (root / STATS_PATH).write_text(json.dumps(merged, indent=4))
     (root / HISTOGRAMS_PATH).parent.mkdir(parents=True, exist_ok=True)
     (root / HISTOGRAMS_PATH).write_text(json.dumps(histograms))
+    sketches.write(root)
+    return sketches
+
+
+def write_episode_files(
+    root: Path, table: pa.Table, *, start: tuple[int, int], file_size_in_mb: float, chunks_size: int
+) -> list[tuple[int, int]]:
+    """Write the episode rows from file ``start`` on, rotating by size as LeRobot's writer does: rows go
+    in batches of :data:`EPISODES_BATCH`, and a new file starts when the current one's size plus the
+    batch's estimated size (the file's average bytes per row so far) would reach ``file_size_in_mb``
+    (LeRobot uses ``data_files_size_in_mb`` for its episodes files too). Returns the files written."""
+    limit_bytes = file_size_in_mb * 1024 * 1024
+    chunk_file = start
+    written = [chunk_file]
+    rows_in_file = 0
+    writer: pq.ParquetWriter | None = None
+    path = root / EPISODES_PATH.format(chunk_index=chunk_file[0], file_index=chunk_file[1])
+    first = table.num_columns
+    columns = {"meta/episodes/chunk_index": pa.int64(), "meta/episodes/file_index": pa.int64()}
+    schema = table.schema
+    for name, kind in columns.items():
+        schema = schema.append(pa.field(name, kind))
+    try:
+        for offset in range(0, table.num_rows, EPISODES_BATCH):
+            batch = table.slice(offset, EPISODES_BATCH)
+            if writer is not None and rows_in_file:
+                size = path.stat().st_size
+                if size + size / rows_in_file * batch.num_rows >= limit_bytes:
+                    writer.close()
+                    writer, rows_in_file = None, 0
+                    chunk_file = next_chunk_file(*chunk_file, chunks_size)
+                    written.append(chunk_file)
+            if writer is None:
+                path = root / EPISODES_PATH.format(chunk_index=chunk_file[0], file_index=chunk_file[1])
+                path.parent.mkdir(parents=True, exist_ok=True)
+                writer = pq.ParquetWriter(path, schema)
+            for n, name in enumerate(columns):
+                batch = batch.add_column(
+                    first + n, name, pa.array([chunk_file[n]] * batch.num_rows, pa.int64())
+                )
+            writer.write_table(batch)
+            rows_in_file += batch.num_rows
+    finally:
+        if writer is not None:
+            writer.close()
+    return written

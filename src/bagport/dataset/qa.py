@@ -1,31 +1,55 @@
 """The dataset's QA record: ``meta/qa/`` beside (never inside) ``info.json``.
 
 ```
-meta/qa/chunk-000/file-000.parquet   one row per episode and check (value, verdict, reason)
+meta/qa/chunk-000/file-NNN.parquet   run NNN: one row per episode and check (value, verdict, reason)
+meta/qa/index/run-NNN.parquet        run NNN: one compact row per episode (bagport.qa.fleet.INDEX_SCHEMA)
+meta/qa/details/run-NNN/PPPPPP.html  a warned or failed episode's page: checks, plots, thumbnails
 meta/qa/summary.json                 per bag: episode index (null when excluded), score, verdict, reason
-meta/qa/report.html                  the self-contained report (see bagport.qa.report)
+meta/qa/report.html                  the fleet report over the whole dataset (bagport.qa.fleet)
 ```
-Excluded bags and bags that could not be converted are listed too, with the reason.
+Excluded bags and bags that could not be converted are listed too, with the reason. Each run adds its
+own table, index and detail files; ``summary.json`` and ``report.html`` are rebuilt from the index files
+alone, so an append never reads the old episodes' checks or plots.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from bagport.qa import QAEntry
-from bagport.qa.report import render_report
+from bagport.dataset.meta import EpisodeStats
+from bagport.dataset.sketches import DatasetSketches
+from bagport.qa import QAConfig, QAEntry
+from bagport.qa.fleet import INDEX_SCHEMA, detail_path, index_table, render_fleet_page
+from bagport.qa.jumps import step_outlier_checks
+from bagport.qa.report import Names, render_episode_page
+from bagport.staging import StagedFeature
 
-__all__ = ["QA_REPORT_PATH", "QA_SUMMARY_PATH", "QA_TABLE_PATH", "QAEntry", "qa_rows", "write_qa"]
+__all__ = [
+    "QA_INDEX_PATH",
+    "QA_REPORT_PATH",
+    "QA_SUMMARY_PATH",
+    "QA_TABLE_PATH",
+    "QAEntry",
+    "add_fleet_checks",
+    "qa_rows",
+    "write_qa",
+]
 
 QA_TABLE_PATH = "meta/qa/chunk-000/file-000.parquet"
 QA_SUMMARY_PATH = "meta/qa/summary.json"
 QA_REPORT_PATH = "meta/qa/report.html"
+QA_INDEX_PATH = "meta/qa/index/run-{run:03d}.parquet"
+_BRIEF_KEYS = (
+    "bag_uri", "manifest_entry", "episode_index", "score", "verdict", "excluded", "reason", "duration_s",
+    "frames", "video_psnr_min_db", "video_damaged_frames", "segment", "label", "note", "excluded_by_label",
+)  # fmt: skip
 
 
 _QA_FIELDS: list[tuple[str, pa.DataType]] = [
@@ -40,6 +64,29 @@ _QA_FIELDS: list[tuple[str, pa.DataType]] = [
     ("reason", pa.string()),
 ]
 QA_SCHEMA = pa.schema(_QA_FIELDS)
+
+
+def add_fleet_checks(
+    entries: Sequence[QAEntry],
+    episode_stats: Sequence[EpisodeStats],
+    sketches: DatasetSketches,
+    features: Sequence[StagedFeature],
+    config: dict[str, Any],
+    fps: int,
+) -> list[QAEntry]:
+    """The entries with the checks that need the whole fleet (:mod:`bagport.qa.jumps`) added to each
+    kept episode of this run (``episode_index`` counts this run's kept episodes, as ``episode_stats``)."""
+    values = QAConfig.model_validate(config).values
+    names = {f.key: f.names for f in features}
+    out = []
+    for entry in entries:
+        if entry.episode_index is None:
+            out.append(entry)
+            continue
+        stats = episode_stats[entry.episode_index]
+        extra = step_outlier_checks(stats.largest_steps, sketches.steps, names, values, fps)
+        out.append(replace(entry, qa=entry.qa.with_checks(extra)))
+    return out
 
 
 def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
@@ -71,34 +118,63 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
     return pa.table(rows, schema=QA_SCHEMA)
 
 
+def _read_index(root: Path, run_number: int) -> pa.Table:
+    """Every run's index rows (a dataset written before the index existed: from its summary.json)."""
+    paths = sorted((root / "meta/qa/index").glob("run-*.parquet"))
+    tables = [pq.read_table(p, schema=INDEX_SCHEMA) for p in paths]
+    summary_path = root / QA_SUMMARY_PATH
+    if (
+        run_number
+        and len(paths) <= 1
+        and summary_path.is_file()
+        and not (root / QA_INDEX_PATH.format(run=0)).is_file()
+    ):
+        legacy = json.loads(summary_path.read_text()).get("episodes", [])
+        rows = [
+            {**{k: e.get(k) for k in _BRIEF_KEYS}, "run": 0, "position": n, "name": str(e["bag_uri"]).rsplit("/", 1)[-1],
+             "robot_type": "", "folder": str(e["bag_uri"]).rsplit("/", 1)[0], "day": "unknown",
+             "fails": [], "warns": [], "detail": False}
+            for n, e in enumerate(legacy)
+        ]  # fmt: skip
+        tables.insert(0, pa.Table.from_pylist(rows, schema=INDEX_SCHEMA))
+    return pa.concat_tables(tables)
+
+
 def write_qa(
     root: Path,
     entries: Sequence[QAEntry],
     dataset: dict[str, Any],
     config: dict[str, Any],
     run_number: int = 0,
+    *,
+    robot_type: str = "",
+    names: Names | None = None,
 ) -> str:
-    """Write the QA table, summary and HTML report under ``root/meta/qa``.
-
-    An append (``run_number`` > 0) adds its own table file and report, and extends the summary.
-    Returns the report's path in the dataset (``meta/qa/report[-NNN].html``).
-    """
+    """Write this run's QA table, index and detail pages under ``root/meta/qa``, then rebuild the summary
+    and the fleet report over every run from the index files. Returns the report's path in the dataset."""
     table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
     table_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(qa_rows(entries), table_path, compression="zstd")
-    report_path = (
-        QA_REPORT_PATH if run_number == 0 else QA_REPORT_PATH.replace(".html", f"-{run_number:03d}.html")
-    )
-    summary_path = root / QA_SUMMARY_PATH
-    previous = json.loads(summary_path.read_text()) if run_number and summary_path.is_file() else {}
-    episodes = [*previous.get("episodes", []), *(e.brief() for e in entries)]
+    index = index_table(entries, run_number, robot_type)
+    index_path = root / QA_INDEX_PATH.format(run=run_number)
+    index_path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(index, index_path, compression="zstd")
+    fps = dataset.get("fps")
+    for position, entry in enumerate(entries):
+        if entry.qa.verdict != "pass":
+            page = root / "meta/qa" / detail_path(run_number, position)
+            page.parent.mkdir(parents=True, exist_ok=True)
+            html = render_episode_page(entry, names, int(fps) if fps else None, "../../report.html")
+            page.write_text(html, encoding="utf-8")
+    whole = _read_index(root, run_number)
+    episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in whole.select(list(_BRIEF_KEYS)).to_pylist()]
     summary = {
         "episodes": episodes,
         "kept": sum(e["episode_index"] is not None for e in episodes),
         "excluded": sum(e["episode_index"] is None for e in episodes),
         "thresholds": config,
-        "reports": [*previous.get("reports", []), report_path.removeprefix("meta/qa/")],
+        "reports": [QA_REPORT_PATH.removeprefix("meta/qa/")],
     }
-    summary_path.write_text(json.dumps(summary, indent=1))
-    (root / report_path).write_text(render_report(entries, dataset), encoding="utf-8")
-    return report_path
+    (root / QA_SUMMARY_PATH).write_text(json.dumps(summary, indent=1))
+    (root / QA_REPORT_PATH).write_text(render_fleet_page(whole, dataset, run_number), encoding="utf-8")
+    return QA_REPORT_PATH

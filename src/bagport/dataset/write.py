@@ -19,7 +19,7 @@ from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import run_record_path, write_provenance
 from bagport.dataset.publish import building_beside, commit_append, swap_into_place
-from bagport.dataset.qa import write_qa
+from bagport.dataset.qa import add_fleet_checks, write_qa
 from bagport.dataset.remote import append_remote, publish_remote
 from bagport.dataset.repair import repair_dataset
 from bagport.dataset.videos import write_video_files
@@ -46,7 +46,7 @@ class DatasetReport:
     qa: tuple[dict[str, Any], ...] = ()
     """Every bag's QA brief: episode index (None when excluded), score, verdict, reason."""
     qa_report: str | None = None
-    """This run's HTML QA report in the dataset (an append's is ``meta/qa/report-NNN.html``)."""
+    """The HTML QA report in the dataset (``meta/qa/report.html``: every run, rebuilt by each one)."""
     converted: int = 0
     """Episodes this run converted (or tried to); the others came from the staging store as they were."""
     reused: tuple[str, ...] = ()
@@ -150,11 +150,8 @@ def _build(
     )
     if base is not None:
         _check_same_features(base, info)
-    data_files: list[str | Path] = [
-        *(base.data_files if base is not None else ()),
-        *sorted(root.glob("data/chunk-*/file-*.parquet")),
-    ]
-    write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base, data_files)
+    sketches = write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base)
+    qa = add_fleet_checks(qa, episode_stats, sketches, features, qa_config, fps)  # jumps vs the fleet
     write_provenance(root, summaries, data, run_record, base)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())
     total_frames = first_index + new_frames
@@ -172,7 +169,15 @@ def _build(
         for e in qa
     ]
     qa_report = (
-        write_qa(root, entries, facts, qa_config, base.run_number if base is not None else 0)
+        write_qa(
+            root,
+            entries,
+            facts,
+            qa_config,
+            base.run_number if base is not None else 0,
+            robot_type=robot_type,
+            names={f.key: f.names for f in features},
+        )
         if entries
         else None
     )

@@ -42,7 +42,7 @@ from bagport.staging import (
     staged_path,
     write_json,
 )
-from bagport.stats import stats_to_json, vector_stats
+from bagport.stats import episode_sketch_fields, stats_to_json, vector_stats
 from bagport.video import EncoderSettings
 
 __all__ = ["convert_episode"]
@@ -157,7 +157,8 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
             )
             for name in table.column_names:
-                stats[name] = stats_to_json(vector_stats(vector_column(table, name)))
+                values = vector_column(table, name)
+                stats[name] = {**stats_to_json(vector_stats(values)), **episode_sketch_fields(values)}
             for key, camera in sinks.cameras.items():
                 acc = camera.stats
                 stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}

@@ -100,6 +100,12 @@ class ValuesQA(_Strict):
     bright_threshold: float = 247.0
     dark_or_bright_frames: Gate = Field(default_factory=lambda: _gate(1.0, 30.0))
     """Frames whose mean grey level is below ``dark_threshold`` or above ``bright_threshold``."""
+    step_quantile: float = Field(default=0.99, gt=0, lt=1)
+    """The fleet's own step size per dimension: this quantile of ``|frame-to-frame change|`` over every
+    frame of the dataset (merged sketches, see bagport.qa.jumps)."""
+    step_outlier: Gate = Field(default_factory=lambda: _gate(5.0, None, hard=False))
+    """An episode's largest step in a dimension over the fleet's ``step_quantile`` step (ratio); judged in
+    the reduce, once the fleet is known. ``warn: null`` turns it off."""
 
 
 class SafetyQA(_Strict):

@@ -2,15 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
 from bagport.qa.config import Gate
 
-__all__ = ["CheckResult", "EpisodeQA", "QAEntry", "Verdict", "judge", "score_checks"]
+__all__ = ["SCORE_BANDS", "CheckResult", "EpisodeQA", "QAEntry", "Verdict", "judge", "score_checks"]
 
 Verdict = Literal["pass", "warn", "fail"]
-_POINTS = {"pass": 1.0, "warn": 0.5, "fail": 0.0}
 
 
 @dataclass(frozen=True, slots=True)
@@ -51,14 +50,21 @@ def judge(
     return CheckResult(check, subject, float(value), verdict, gate.hard, describe + bound)
 
 
+SCORE_BANDS: dict[Verdict, tuple[float, float]] = {"fail": (0.0, 0.4), "warn": (0.5, 0.9), "pass": (1.0, 1.0)}
+"""Score range per verdict: any hard failure scores below any warning, any warning below any pass."""
+
+
 def score_checks(checks: list[CheckResult]) -> tuple[float, Verdict]:
-    """Score in [0, 1] (pass 1, warn 0.5, fail 0, averaged) and the verdict (worst check)."""
+    """The verdict (the worst check) and a score in [0, 1] that orders by severity first: inside the
+    verdict's band (:data:`SCORE_BANDS`) it rises with the share of checks that passed, so a hard
+    failure is always below 0.4, a warning in [0.5, 0.9), a clean episode 1."""
     if not checks:
         return 1.0, "pass"
-    score = sum(_POINTS[c.verdict] for c in checks) / len(checks)
     verdicts = {c.verdict for c in checks}
     verdict: Verdict = "fail" if "fail" in verdicts else "warn" if "warn" in verdicts else "pass"
-    return round(score, 4), verdict
+    low, high = SCORE_BANDS[verdict]
+    passed = sum(c.verdict == "pass" for c in checks) / len(checks)
+    return round(low + (high - low) * passed, 4), verdict
 
 
 @dataclass(frozen=True, slots=True)
@@ -86,6 +92,12 @@ class EpisodeQA:
     def failed(cls, bag_uri: str, error: str) -> EpisodeQA:
         check = CheckResult("coverage.convertible", "episode", 1.0, "fail", True, error)
         return cls(bag_uri, 0.0, "fail", [check], error=error)
+
+    def with_checks(self, extra: list[CheckResult]) -> EpisodeQA:
+        """This record with ``extra`` checks added (judged later, e.g. against the fleet), rescored."""
+        checks = [*self.checks, *extra]
+        score, verdict = score_checks(checks)
+        return replace(self, checks=checks, score=score, verdict=verdict)
 
     @property
     def problems(self) -> list[CheckResult]:

@@ -8,11 +8,13 @@ the repeated buffers a frozen stream produces.
 
 from __future__ import annotations
 
+import base64
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import simplejpeg
 
 from bagport.qa.config import Gate, ValuesQA
 from bagport.qa.result import CheckResult, judge
@@ -22,6 +24,9 @@ __all__ = ["ValueMonitor"]
 _GRID_STEP = 8
 _TRACE_POINTS = 200
 _TRACE_DIMS = 8
+_THUMBNAILS = 8
+"""Frames per camera kept as small JPEGs for the report's thumbnail strip (evenly spread)."""
+_THUMBNAIL_PX = 64
 
 
 @dataclass(slots=True)
@@ -56,6 +61,7 @@ class _ImageState:
     frozen: _Run = field(default_factory=_Run)
     dark_or_bright: int = 0
     first_dark_or_bright: int = -1
+    thumbnails: list[dict[str, Any]] = field(default_factory=list)
     means: list[float] = field(default_factory=list)
 
 
@@ -66,6 +72,7 @@ class ValueMonitor:
         self._config = config
         self._fps = fps
         self._stride = max(1, -(-total_frames // _TRACE_POINTS))
+        self._thumb_every = max(1, -(-total_frames // _THUMBNAILS))
         self._vectors: dict[str, _VectorState] = {}
         self._images: dict[str, _ImageState] = {}
         self.frames = 0
@@ -112,6 +119,8 @@ class ValueMonitor:
         state.frozen.previous = grid.copy()
         if k % self._stride == 0:
             state.means.append(round(mean, 2))
+        if k % self._thumb_every == 0:
+            state.thumbnails.append({"frame": k, "jpeg": _thumbnail(rgb)})
         self.frames = max(self.frames, k + 1)
 
     def _at(self, k: int) -> str:
@@ -160,4 +169,15 @@ class ValueMonitor:
             "trace_step_s": step_s,
             "vectors": {key: s.trace for key, s in self._vectors.items()},
             "image_means": {key: i.means for key, i in self._images.items()},
+            "thumbnails": {key: i.thumbnails for key, i in self._images.items()},
         }
+
+
+def _thumbnail(image: npt.NDArray[np.uint8]) -> str:
+    """A JPEG about :data:`_THUMBNAIL_PX` high, base64 (grey for a depth preview)."""
+    step = max(1, image.shape[0] // _THUMBNAIL_PX)
+    small = np.ascontiguousarray(image[::step, ::step])
+    if small.ndim == 2:
+        small = small[:, :, None]
+    space = "GRAY" if small.shape[2] == 1 else "RGB"
+    return base64.b64encode(simplejpeg.encode_jpeg(small, quality=70, colorspace=space)).decode("ascii")

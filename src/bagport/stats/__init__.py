@@ -11,18 +11,20 @@ from bagport.stats.numeric import (
     histogram_stats,
     vector_stats,
 )
-from bagport.stats.quantiles import QUANTILE_BINS, QuantileHistogram
+from bagport.stats.sketch import SKETCH_K, VectorSketch, episode_sketch_fields, rank_error
 
 __all__ = [
     "QUANTILES",
-    "QUANTILE_BINS",
-    "QuantileHistogram",
+    "SKETCH_K",
     "STAT_KEYS",
     "FeatureStats",
+    "VectorSketch",
     "ImageStatsAccumulator",
+    "episode_sketch_fields",
     "histogram_stats",
     "merge_feature_stats",
     "merge_histograms",
+    "rank_error",
     "stats_from_json",
     "stats_to_json",
     "vector_stats",

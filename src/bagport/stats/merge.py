@@ -2,8 +2,8 @@
 
 min of mins, max of maxes, count-weighted mean, pooled variance; quantiles are the
 count-weighted mean of per-episode quantiles, as LeRobot 0.6.1 does (an
-approximation for vectors: the dataset writer replaces them with
-:mod:`bagport.stats.quantiles`, within one bin).  Image quantiles are exact: they
+approximation for vectors: the dataset writer replaces them with the merged sketches'
+quantiles, :mod:`bagport.stats.sketch`, within its stated rank error).  Image quantiles are exact: they
 come from the summed pixel histograms.
 """
 

@@ -86,9 +86,11 @@ def test_append_adds_new_files_and_keeps_old_ones_byte_identical(bags: Path, tmp
     assert [(e["episode_index"], e["bag_uri"].rsplit("/", 1)[-1]) for e in appended["episodes"]] == [(2, "c")]
     qa = json.loads((out / "meta/qa/summary.json").read_text())
     assert [e["episode_index"] for e in qa["episodes"]] == [0, 1, 2]
-    assert qa["reports"] == ["report.html", "report-001.html"]
-    # each run's report names its own HTML QA report (the CLI and the summary artifact print it)
-    assert [r.qa_report for r in reports] == ["meta/qa/report.html", "meta/qa/report-001.html"]
+    assert qa["reports"] == ["report.html"]
+    # one report over the whole dataset, rebuilt by each run from the per-run QA index files
+    assert [r.qa_report for r in reports] == ["meta/qa/report.html", "meta/qa/report.html"]
+    assert sorted(p.name for p in (out / "meta/qa/index").iterdir()) == ["run-000.parquet", "run-001.parquet"]
+    assert "over 2 run(s)" in (out / "meta/qa/report.html").read_text()
     report = validate_dataset(out, repo_id="test/append")
     assert report.episodes == 3
     assert report.frames_decoded == info["total_frames"]

@@ -71,7 +71,9 @@ def test_report_is_self_contained_and_lists_every_episode(report_html: Path) -> 
     assert html.count("<svg") >= 8  # rates, alignment histograms, traces, brightness per episode
     assert "messages per second, by topic" in html
     assert html.count("frames in clip / encoded") == 2  # video fidelity per converted episode
-    assert html.count('src="data:image/jpeg;base64,') == 2  # both cameras of the warned episode
+    assert html.count('alt="worst frame of') == 2  # both cameras of the warned episode
+    assert html.count('class="strip"') == 2  # a thumbnail strip per camera, only for the warned episode
+    assert html.count('<figure class="thumb">') == 16
     assert "damaged blocks outlined in red" in html
 
 

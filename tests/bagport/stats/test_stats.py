@@ -7,10 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bagport.stats import (
-    QUANTILE_BINS,
-    QUANTILES,
     ImageStatsAccumulator,
-    QuantileHistogram,
     merge_feature_stats,
     merge_histograms,
     vector_stats,
@@ -63,30 +60,3 @@ def test_histogram_merge_is_exact_across_episodes() -> None:
     pixels = np.stack(all_frames).reshape(-1, 3) / 255.0
     np.testing.assert_allclose(merged["q90"].ravel(), np.quantile(pixels, 0.9, axis=0, method="inverted_cdf"))
     assert merged["count"].tolist() == [12]
-
-
-@settings(max_examples=60, deadline=None)
-@given(
-    sizes=st.lists(st.integers(1, 200), min_size=1, max_size=5),
-    seed=st.integers(0, 1000),
-    discrete=st.booleans(),
-    bins=st.sampled_from([7, 100, QUANTILE_BINS]),
-)
-def test_dataset_quantiles_are_within_one_bin_of_exact(
-    sizes: list[int], seed: int, discrete: bool, bins: int
-) -> None:
-    rng = np.random.default_rng(seed)
-    parts = [rng.standard_cauchy(size=(n, 2)) for n in sizes]  # heavy tails: wide, uneven ranges
-    if discrete:
-        parts = [np.round(p) for p in parts]
-    pooled = np.concatenate(parts)
-    pooled[:, 1] = 3.0 if discrete else pooled[:, 1]  # a constant dimension too
-    counter = QuantileHistogram(pooled.min(axis=0), pooled.max(axis=0), bins=bins)
-    start = 0
-    for n in sizes:  # streamed in pieces, as the reduce step reads files
-        counter.update(pooled[start : start + n])
-        start += n
-    width = counter.bin_width()
-    for key, value in counter.quantiles().items():
-        exact = np.quantile(pooled, QUANTILES[key], axis=0, method="inverted_cdf")
-        assert np.all(np.abs(value - exact) <= width * (1 + 1e-9) + 1e-12), (key, value, exact, width)

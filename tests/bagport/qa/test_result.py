@@ -1,0 +1,38 @@
+"""The score orders episodes by severity: any hard failure below any warning, any warning below a pass."""
+
+from __future__ import annotations
+
+from hypothesis import given
+from hypothesis import strategies as st
+
+from bagport.qa import CheckResult, Verdict, score_checks
+
+
+def _checks(verdicts: list[Verdict]) -> list[CheckResult]:
+    return [CheckResult(f"g.c{i}", "x", 0.0, v, v == "fail", "r") for i, v in enumerate(verdicts)]
+
+
+verdict_lists = st.lists(st.sampled_from(["pass", "warn", "fail"]), min_size=1, max_size=60)
+
+
+@given(a=verdict_lists, b=verdict_lists)
+def test_score_orders_by_severity_first(a: list[Verdict], b: list[Verdict]) -> None:
+    rank = {"fail": 0, "warn": 1, "pass": 2}
+    score_a, verdict_a = score_checks(_checks(a))
+    score_b, verdict_b = score_checks(_checks(b))
+    if rank[verdict_a] < rank[verdict_b]:
+        assert score_a < score_b
+    assert 0.0 <= score_a <= 1.0
+
+
+def test_a_nan_joint_failure_scores_below_a_warned_episode() -> None:
+    # the case that misled a supervisor: 1 hard failure in 50 checks scored 0.98, above a warning's 0.96
+    fail: list[Verdict] = ["fail"]
+    warn: list[Verdict] = ["warn", "warn"]
+    passes: list[Verdict] = ["pass"]
+    failed = score_checks(_checks(fail + passes * 49))
+    warned = score_checks(_checks(warn + passes * 23))
+    assert failed[1] == "fail" and warned[1] == "warn"
+    assert failed[0] < 0.4
+    assert 0.5 <= warned[0] < 0.9
+    assert score_checks(_checks(passes * 3)) == (1.0, "pass")

@@ -84,7 +84,8 @@ def plan_run(config: ConvertConfig) -> RunPlan:
     fs, out_path = url_to_fs(config.output)
     require_bucket(fs, out_path, config.output)
     staging = config.resolved_staging()
-    require_bucket(*url_to_fs(staging), staging)
+    staging_fs, staging_path = url_to_fs(staging)
+    require_bucket(staging_fs, staging_path, staging)
     recover_publish(config.output)  # before reading what an --append adds to
     done: set[tuple[str, str]] = set()
     if config.append and fs.exists(out_path):

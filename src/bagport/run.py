@@ -29,7 +29,7 @@ from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
 from bagport.segment import EXCLUDED_LABELS, kept_segmentation, label_reason, segment_request, segments_bags
 from bagport.staging import QA_FILE, EpisodeSummary, read_summary
-from bagport.uris import read_text
+from bagport.uris import read_text, require_bucket
 from bagport.video import EncoderSettings
 
 __all__ = [
@@ -97,6 +97,10 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         assert config.manifest is not None  # the config validates that one of the two is given
         manifest = load_manifest(config.manifest)
     fs, out_path = url_to_fs(config.output)
+    require_bucket(fs, out_path, config.output)
+    staging = config.resolved_staging()
+    staging_fs, staging_path = url_to_fs(staging)
+    require_bucket(staging_fs, staging_path, staging)
     repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to
     done: set[tuple[str, str]] = set()
     stamps: dict[str, str] = {}
@@ -113,7 +117,6 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             f"{config.output} already exists; nothing was written. Fix: choose a new --output, or pass "
             "--overwrite to replace it (the old dataset stays until the new one is complete)."
         )
-    staging = config.resolved_staging()
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(

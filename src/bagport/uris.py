@@ -5,9 +5,12 @@ from __future__ import annotations
 import fsspec
 from fsspec import AbstractFileSystem
 
-from bagport.errors import ContractError
+from bagport.errors import ContractError, DatasetWriteError
 
-__all__ = ["is_local", "protocol_of", "read_text"]
+__all__ = ["is_local", "protocol_of", "read_text", "require_bucket"]
+
+BUCKET_STORES = frozenset({"s3", "s3a", "gs", "gcs", "abfs", "abfss", "az", "adl"})
+"""Object stores whose first path component is a bucket (container) that writing would create."""
 
 
 def protocol_of(fs: AbstractFileSystem) -> str:
@@ -29,3 +32,18 @@ def read_text(uri: str, what: str) -> str:
             return str(handle.read())
     except FileNotFoundError as err:
         raise ContractError(f"{what} file does not exist", file=uri, fix=f"check the --{what} path.") from err
+
+
+def require_bucket(fs: AbstractFileSystem, path: str, uri: str) -> None:
+    """An object-store ``uri`` must name a bucket that exists: writing into a misspelt bucket would
+    create a new one (s3fs does) and hide the dataset there. Other stores pass unchecked."""
+    if protocol_of(fs) not in BUCKET_STORES:
+        return
+    bucket = path.strip("/").split("/", 1)[0]
+    if bucket and fs.exists(bucket):
+        return
+    raise DatasetWriteError(
+        f"{uri}: the bucket {bucket!r} does not exist (or these credentials cannot see it); nothing was "
+        "converted or written. Fix: check the bucket name in --output/--staging, or create the bucket "
+        "first (bagport never creates buckets)."
+    )

@@ -26,7 +26,7 @@ CAMERAS = (
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Three bags: clean, NaN joints (fails QA), clean."""
     root = tmp_path_factory.mktemp("fleet")
-    spec = EpisodeSpec(duration_s=2.5, cameras=CAMERAS)
+    spec = EpisodeSpec(duration_s=2.5, cameras=CAMERAS, mcap_crcs=True)  # checksummed: verdicts stay "pass"
     for name, faults in (("a", Faults()), ("nan", Faults(joint_nan_at_s=1.0)), ("c", Faults())):
         write_episode_bag(root / name, "mcap", replace(spec, faults=faults))
     (root / "manifest.yaml").write_text("bags:\n  - uri: a\n  - uri: nan\n  - uri: c\n")

@@ -48,7 +48,8 @@ def _file_storage(path: Path | RemotePath, uri: str) -> Storage:
 
 
 def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
-    """Storage of a local bag: a rosbag2 folder (by metadata or files) or a single file (by magic)."""
+    """Storage of a bag: a single file or a rosbag2 folder by the magic of its (first) data file, by
+    ``metadata.yaml`` only when the files are compressed whole; the layout warns when the two disagree."""
     if not path.exists():
         raise BagReadError(
             "does not exist", uri=uri, fix="check the manifest uri (relative to the manifest file)."
@@ -64,15 +65,33 @@ def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
             raise BagReadError(
                 f"metadata.yaml is unreadable ({err})", uri=uri, fix="re-index the bag."
             ) from err
-        if storage_id in (Storage.MCAP, Storage.SQLITE3):
-            return Storage(storage_id)
+    else:
+        storage_id = ""
     files = sorted(
         (p for p in path.iterdir() if p.suffix in (".mcap", ".db3") and p.is_file()), key=lambda p: p.name
     )
+    if not files and storage_id in (Storage.MCAP, Storage.SQLITE3):
+        return Storage(storage_id)  # files compressed whole (.mcap.zstd): their content cannot tell
     if not files:
         raise BagReadError(
             "is a folder without metadata.yaml, .mcap or .db3 files",
             uri=uri,
             fix="point the manifest at a rosbag2 folder or at the bag file itself.",
         )
+    if storage_id in (Storage.MCAP, Storage.SQLITE3) and not _has_magic(files[0]):
+        raise BagReadError(
+            f"{files[0].name} has no ROS 1, MCAP or SQLite signature at its start (its first 16 bytes are "
+            f"damaged; metadata.yaml says {storage_id})",
+            uri=uri,
+            fix="copy the bag again from the robot or a backup.",
+        )
     return _file_storage(files[0], uri)
+
+
+def _has_magic(path: Path | RemotePath) -> bool:
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(16)
+    except OSError:
+        return True  # unreadable: _file_storage reports it
+    return head.startswith((ROS1_MAGIC, MCAP_MAGIC, SQLITE_MAGIC))

@@ -77,10 +77,16 @@ def _metadata(folder: BagPath, uri: str) -> dict[str, Any] | None:
         ) from err
 
 
-def _metadata_problem(metadata: dict[str, Any], present: list[BagPath]) -> str | None:
+def _metadata_problem(metadata: dict[str, Any], present: list[BagPath], storage: Storage) -> str | None:
     storage_id = str(metadata.get("storage_identifier") or "")
     if storage_id not in (Storage.MCAP, Storage.SQLITE3):
         return f"metadata.yaml has storage id {storage_id!r}"
+    content = [p.name for p in present if p.suffix == SUFFIX[storage]]
+    if storage_id != storage and content:
+        return (
+            f"metadata.yaml says storage_identifier: {storage_id}, but {content[0]} is {storage} by its content "
+            f"(Fix: set storage_identifier: {storage} in metadata.yaml, or re-create it with `ros2 bag reindex`)"
+        )
     listed = [PurePath(str(x)).name for x in metadata.get("relative_file_paths") or []]
     names = [p.name for p in present]
     if sorted(listed) != sorted(names):
@@ -97,7 +103,7 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Path, uri: str) -> Read
     present = _data_files(path)
     metadata = _metadata(path, uri)
     if metadata is not None:
-        problem = _metadata_problem(metadata, present)
+        problem = _metadata_problem(metadata, present, storage)
         if problem is None:
             folder = _alias(path, "bag", scratch) if path.suffix == ".bag" else path
             return ReadPlan([folder], [*present, path / "metadata.yaml"], present)

@@ -6,11 +6,17 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
+from rosbags.highlevel import AnyReaderError
+
+from bagport.errors import DecodeError
+
 __all__ = ["BagMessage", "HeaderLayout"]
 
 _LE = struct.Struct("<iI")
 _BE = struct.Struct(">iI")
 _ROS1 = struct.Struct("<II")
+_DAMAGED = (AnyReaderError, struct.error, IndexError, KeyError, ValueError, UnicodeDecodeError)
+"""What rosbags' deserialisers raise on bytes that do not hold a message of the type."""
 
 
 class HeaderLayout:
@@ -35,7 +41,7 @@ def stamp_from_raw(raw: bytes | memoryview, layout: str) -> int | None:
 
 
 class BagMessage:
-    __slots__ = ("_deserialize", "_layout", "_msg", "_raw", "log_time_ns", "msgtype", "topic")
+    __slots__ = ("_deserialize", "_layout", "_msg", "_raw", "log_time_ns", "msgtype", "topic", "uri")
 
     def __init__(
         self,
@@ -45,6 +51,7 @@ class BagMessage:
         raw: bytes | memoryview,
         deserialize: Callable[[bytes | memoryview, str], Any],
         header_layout: str | None,
+        uri: str | None = None,
     ) -> None:
         self.topic = topic
         self.msgtype = msgtype
@@ -53,11 +60,23 @@ class BagMessage:
         self._deserialize = deserialize
         self._layout = header_layout
         self._msg: Any = None
+        self.uri = uri
 
     def msg(self) -> Any:
         """The deserialised message (a rosbags dataclass); cached."""
         if self._msg is None:
-            self._msg = self._deserialize(self._raw, self.msgtype)
+            try:
+                self._msg = self._deserialize(self._raw, self.msgtype)
+            except _DAMAGED as err:
+                raise DecodeError(
+                    f"the {len(self._raw)}-byte message does not deserialise as {self.msgtype} "
+                    f"({' '.join(str(err).split())}): its bytes are damaged",
+                    uri=self.uri,
+                    topic=self.topic,
+                    t_ns=self.log_time_ns,
+                    fix="copy the bag again from the robot or a backup, or leave this moment out with the "
+                    "manifest entry's start_s/end_s.",
+                ) from err
         return self._msg
 
     def header_stamp_ns(self) -> int | None:

@@ -14,12 +14,11 @@ from typing import Any, Protocol
 import yaml
 from backports import zstd
 from fsspec.core import url_to_fs
-from rosbags.highlevel import AnyReaderError
 from rosbags.interfaces import Nodetype
-from rosbags.rosbag1 import ReaderError as Ros1ReaderError
-from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from rosbags.typesys import Stores, get_typestore
 
+from bagport.bags.checksums import bag_checksums
+from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag
 from bagport.bags.detect import detect_storage
 from bagport.bags.indexcount import window_counts
 from bagport.bags.layout import BagPath, plan_reads
@@ -39,7 +38,6 @@ __all__ = ["BagReader", "open_bag"]
 _HEADER = "std_msgs/msg/Header"
 RANGED_STORAGES = frozenset({Storage.MCAP})
 """Read in place on remote stores (summary + chunk index); other formats are downloaded first."""
-_ROSBAGS_ERRORS = (AnyReaderError, Ros1ReaderError, Ros2ReaderError)
 
 
 class BagReader(Protocol):
@@ -106,6 +104,7 @@ class RosbagsReader:
             raise
         self._decompress = plan.message_compression
         self._mcap_files = plan.data_files if storage is Storage.MCAP else []
+        self._data_files = plan.data_files
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
             extra = parse_msg_definitions(msg_definitions or {})
@@ -119,16 +118,12 @@ class RosbagsReader:
         except BagportError:
             self.close()
             raise
-        except _ROSBAGS_ERRORS as err:
+        except STORAGE_ERRORS as err:
+            error = damaged_bag(
+                err, uri=uri, storage=storage, files=plan.data_files, action="cannot be opened"
+            )
             self.close()
-            raise BagReadError(f"cannot be opened: {err}", uri=uri, fix=_fix_for(err)) from err
-        except (OSError, ValueError, KeyError, IndexError) as err:
-            self.close()
-            raise BagReadError(
-                f"cannot be opened ({type(err).__name__}: {err})",
-                uri=uri,
-                fix="the bag is corrupt or truncated.",
-            ) from err
+            raise error from err
         except BaseException:  # TransientError from a ranged read, KeyboardInterrupt
             self.close()
             raise
@@ -149,6 +144,7 @@ class RosbagsReader:
             message_count=message_count,
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
             custom_data=_custom_data(path),
+            checksums=bag_checksums(storage, plan.data_files),
             warnings=(
                 *plan.warnings,
                 *(f"type {t} cannot be loaded: {why}" for t, why in sorted(self._reader.unloadable.items())),
@@ -218,21 +214,26 @@ class RosbagsReader:
         layouts = {c.msgtype: self._header_layout(c.msgtype) for c in conns}
         deserialize = self._reader.deserialize
         yielded = dict.fromkeys((c.topic for c in conns), 0)
-        try:
-            for conn, log_ns, raw in self._reader.messages(connections=conns, start=start_ns, stop=stop_ns):
+        records = checked_records(
+            self._reader.messages(connections=conns, start=start_ns, stop=stop_ns),
+            uri=self._uri,
+            storage=self._info.storage,
+            files=self._data_files,
+        )
+        for conn, log_ns, raw in records:
+            try:
                 payload = zstd.decompress(raw) if self._decompress else raw
-                yielded[conn.topic] += 1
-                yield BagMessage(
-                    conn.topic, conn.msgtype, int(log_ns), payload, deserialize, layouts[conn.msgtype]
-                )
-        except _ROSBAGS_ERRORS as err:
-            raise BagReadError(f"reading failed: {err}", uri=self._uri, fix=_fix_for(err)) from err
-        except (OSError, ValueError, KeyError, IndexError, EOFError, zstd.ZstdError) as err:
-            raise BagReadError(
-                f"reading failed ({type(err).__name__}: {err})",
-                uri=self._uri,
-                fix="the bag is corrupt or truncated.",
-            ) from err
+            except zstd.ZstdError as err:
+                raise BagReadError(
+                    f"a message on {conn.topic} at log time {log_ns} ns does not decompress ({err})",
+                    uri=self._uri,
+                    topic=conn.topic,
+                    fix="copy the bag again from the robot or a backup; its bytes changed after recording.",
+                ) from err
+            yielded[conn.topic] += 1
+            yield BagMessage(
+                conn.topic, conn.msgtype, log_ns, payload, deserialize, layouts[conn.msgtype], self._uri
+            )
         window = "" if start_ns is None and stop_ns is None else f" in [{start_ns}, {stop_ns}) ns"
         self._check_counts(yielded, self._promised_in(conns, start_ns, stop_ns), window)
 
@@ -292,13 +293,6 @@ class RosbagsReader:
         self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
     ) -> None:
         self.close()
-
-
-def _fix_for(err: Exception) -> str:
-    text = str(err).lower()
-    if "index" in text or "reindex" in text:
-        return "reindex the bag (`rosbag reindex` for ROS 1, `ros2 bag reindex` for rosbag2)."
-    return "check that the file is a complete, uncorrupted bag."
 
 
 def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | None]:

@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
-__all__ = ["BagInfo", "Storage", "TopicInfo"]
+__all__ = ["BagInfo", "Checksums", "Storage", "TopicInfo"]
 
 
 class Storage(StrEnum):
@@ -27,6 +27,26 @@ class TopicInfo:
 
 
 @dataclass(frozen=True, slots=True)
+class Checksums:
+    """Whether what is read from a bag is checked against checksums its recorder wrote."""
+
+    checked: bool
+    detail: str
+    """What protects the bytes (``MCAP chunk CRC-32s``), or why nothing does."""
+    fix: str = ""
+    """The recorder setting that would add checksums (when ``checked`` is false)."""
+
+    def warning(self) -> str | None:
+        """The one-line warning for a bag whose bytes nobody can check, else ``None``."""
+        if self.checked:
+            return None
+        return (
+            f"{self.detail}: a flipped bit in a message converts into a different value and nobody can tell. "
+            f"Fix: {self.fix}"
+        )
+
+
+@dataclass(frozen=True, slots=True)
 class BagInfo:
     uri: str
     storage: Storage
@@ -39,6 +59,8 @@ class BagInfo:
     custom_data: dict[str, str] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
     """What was odd about the bag and how it was read anyway (e.g. a stale metadata.yaml)."""
+    checksums: Checksums | None = None
+    """Whether reads are checked against the recorder's checksums (``None``: not determined)."""
 
     @property
     def duration_ns(self) -> int:
@@ -58,4 +80,7 @@ class BagInfo:
             "message_count": self.message_count,
             "topics": [{"name": t.name, "msgtype": t.msgtype, "count": t.count} for t in self.topics],
             "warnings": list(self.warnings),
+            "checksums": None
+            if self.checksums is None
+            else {"checked": self.checksums.checked, "detail": self.checksums.detail},
         }

@@ -46,5 +46,11 @@ def format_bag_info(info: BagInfo) -> str:
         )
     for key, value in sorted(info.custom_data.items()):
         lines.append(f"Custom data:       {key}: {value}")
-    lines.extend(f"Warning:           {warning}" for warning in info.warnings)
+    if info.checksums is not None:
+        lines.append(
+            f"Checksums:         {'verified on every read: ' if info.checksums.checked else 'none: '}"
+            f"{info.checksums.detail}"
+        )
+    unchecked = info.checksums.warning() if info.checksums is not None else None
+    lines.extend(f"Warning:           {warning}" for warning in (*info.warnings, *filter(None, [unchecked])))
     return "\n".join(lines)

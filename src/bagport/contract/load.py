@@ -6,7 +6,7 @@ import fsspec
 import pydantic
 import yaml
 
-from bagport.contract.model import Contract
+from bagport.contract.model import MAX_FPS, MAX_RESIZE_PX, Contract
 from bagport.contract.plan import ContractPlan, compile_contract
 from bagport.decode.custom import resolve_decoder
 from bagport.errors import ContractError
@@ -15,7 +15,10 @@ from bagport.yamlsource import explain_validation, load_yaml
 __all__ = ["load_contract", "parse_contract"]
 
 _FIELD_FIXES = {
-    "fps": "fps is the dataset's frame rate, a whole number of frames per second such as 30.",
+    "fps": f"fps is the dataset's frame rate, a whole number of frames per second from 1 to {MAX_FPS}, "
+    "such as 30.",
+    "resize": f"image.resize is the [height, width] frames are scaled to, each side 1 to {MAX_RESIZE_PX} "
+    "pixels, e.g. [240, 320].",
     "key": "use '.' to structure keys (observation.images.front); LeRobot forbids '/'.",
     "type": "write the ROS type as 'pkg/msg/Type', e.g. sensor_msgs/msg/JointState.",
     "topic": "ROS topic names are absolute: '/joint_states'.",
@@ -53,7 +56,7 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
     except pydantic.ValidationError as err:
         default_fix = "see the contract format in the README."
         problem = explain_validation(err, source, Contract, default_fix)
-        last = problem.field.rsplit(".", 1)[-1]
+        last = problem.field.rsplit(".", 1)[-1].split("[", 1)[0]
         fix = _FIELD_FIXES.get(last, problem.fix) if problem.fix == default_fix else problem.fix
         raise ContractError(problem.what, file=name, line=problem.line, field=problem.field, fix=fix) from err
     plan = compile_contract(contract, name, source.line_of)

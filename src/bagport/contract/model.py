@@ -29,6 +29,8 @@ __all__ = [
     "DoneSignal",
     "EpisodeEvents",
     "EpisodesOptions",
+    "MAX_FPS",
+    "MAX_RESIZE_PX",
     "ImageOptions",
     "ObservationEntry",
     "Publish",
@@ -39,6 +41,10 @@ __all__ = [
 ]
 
 _MSGTYPE = re.compile(r"^[A-Za-z][\w]*/(msg/)?[A-Za-z][\w]*$")
+MAX_RESIZE_PX = 8192
+"""Largest ``image.resize`` side: an 8192 x 8192 RGB frame is 192 MiB, and video codecs stop about there."""
+MAX_FPS = 1000
+"""Largest ``fps``: one frame per millisecond (the frame grid of a one-hour bag is then 3.6 M frames)."""
 
 
 def normalize_msgtype(msgtype: str) -> str:
@@ -97,6 +103,21 @@ class Selector(_Strict):
     """tf2_msgs/msg/TFMessage only, optional: and whose ``header.frame_id`` is this frame."""
 
 
+def _check_resize(size: tuple[int, int] | None) -> tuple[int, int] | None:
+    if size is not None and max(size) > MAX_RESIZE_PX:
+        raise ValueError(
+            f"resize {list(size)} asks for frames larger than {MAX_RESIZE_PX} pixels a side "
+            f"({size[0] * size[1] * 3 / 2**20:,.0f} MiB per RGB frame)"
+        )
+    return size
+
+
+def _check_fps(fps: int) -> int:
+    if fps > MAX_FPS:
+        raise ValueError(f"fps {fps} is above {MAX_FPS} (one frame per millisecond)")
+    return fps
+
+
 def _check_depth_range(bounds: tuple[float, float] | None) -> tuple[float, float] | None:
     if bounds is not None and not 0 <= bounds[0] < bounds[1]:
         raise ValueError(f"depth_range_m {list(bounds)} must be [min, max] metres with 0 <= min < max")
@@ -104,8 +125,8 @@ def _check_depth_range(bounds: tuple[float, float] | None) -> tuple[float, float
 
 
 class ImageOptions(_Strict):
-    resize: tuple[PositiveInt, PositiveInt] | None = None
-    """Target ``[height, width]``."""
+    resize: Annotated[tuple[PositiveInt, PositiveInt] | None, AfterValidator(_check_resize)] = None
+    """Target ``[height, width]``, each side at most :data:`MAX_RESIZE_PX`."""
     depth_range_m: Annotated[tuple[float, float] | None, AfterValidator(_check_depth_range)] = None
     """Depth cameras only: ``[min, max]`` metres the 12-bit depth codes span (LeRobot's
     ``depth_min``/``depth_max``; default ``[0.01, 10.0]``)."""
@@ -206,7 +227,10 @@ class EpisodesOptions(_Strict):
 
 class Contract(_Strict):
     robot_type: str = Field(validation_alias=AliasChoices("robot_type", "name"))
-    fps: StrictInt = Field(default=30, gt=0, validation_alias=AliasChoices("fps", "rate_hz"))
+    fps: Annotated[StrictInt, AfterValidator(_check_fps)] = Field(
+        default=30, gt=0, validation_alias=AliasChoices("fps", "rate_hz")
+    )
+    """Frames per second of the dataset, 1 to :data:`MAX_FPS`."""
     observations: tuple[ObservationEntry, ...] = ()
     actions: tuple[ActionEntry, ...] = ()
     tasks: tuple[TaskEntry, ...] = ()

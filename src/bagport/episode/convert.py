@@ -20,7 +20,7 @@ from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
 from bagport.episode.cameras import CameraSink
 from bagport.episode.checks import bag_fingerprint, scan_episode
 from bagport.episode.fidelity import EpisodeFidelity
-from bagport.episode.quality import assess_episode, safety_check, task_check
+from bagport.episode.quality import assess_episode, integrity_check, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
@@ -143,6 +143,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
             write_provenance(workdir / PROVENANCE_FILE, sources, ticks)
             extra = [
                 *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
+                *integrity_check(info, qa_config),
                 task_check(qa_config, frame_tasks),
                 *video_checks,
             ]

@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from bagport.bags import BagReader
+from bagport.bags import BagInfo, BagReader
 from bagport.contract import FeatureKind
 from bagport.episode.assemble import AlignedSource
 from bagport.episode.timeline import Timeline
@@ -29,7 +29,7 @@ from bagport.qa import (
     sync_checks,
 )
 
-__all__ = ["assess_episode", "safety_check", "task_check"]
+__all__ = ["assess_episode", "integrity_check", "safety_check", "task_check"]
 
 Int64Array = npt.NDArray[np.int64]
 
@@ -94,6 +94,15 @@ def task_check(config: QAConfig, tasks: Sequence[str]) -> CheckResult:
     missing = float(not any(t.strip() for t in tasks))
     reason = "no task prompt for this episode" if missing else f"{len(set(tasks))} task prompt(s)"
     return judge("content.task_missing", "episode", missing, config.content.task_missing, reason)
+
+
+def integrity_check(info: BagInfo, config: QAConfig) -> list[CheckResult]:
+    """A warning (soft by default) when no checksum covers the bag's bytes, naming the recorder setting."""
+    if info.checksums is None:
+        return []
+    unchecked = float(not info.checksums.checked)
+    reason = info.checksums.warning() or f"checksums verified on read: {info.checksums.detail}"
+    return [judge("integrity.unchecked", "bag", unchecked, config.integrity.unchecked, reason)]
 
 
 def assess_episode(

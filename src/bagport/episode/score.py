@@ -19,7 +19,7 @@ from bagport.contract import FeatureKind, parse_contract
 from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import Frame, assemble_frames
 from bagport.episode.checks import scan_episode
-from bagport.episode.quality import assess_episode, safety_check, task_check
+from bagport.episode.quality import assess_episode, integrity_check, safety_check, task_check
 from bagport.episode.request import EpisodeRequest
 from bagport.episode.tasks import resolve_tasks
 from bagport.errors import BagportError, ManifestError
@@ -58,6 +58,7 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
                 assemble_frames(reader, uri, vectors, vector_sources, ticks, on_frame, plan.source_name)
             extra = [
                 *safety_check(reader, config, int(ticks[0]), int(ticks[-1])),
+                *integrity_check(whole.info, config),
                 task_check(config, frame_tasks),
             ]
             return assess_episode(

@@ -120,6 +120,11 @@ class ContentQA(_Strict):
     """1 when no frame has a task prompt."""
 
 
+class IntegrityQA(_Strict):
+    unchecked: Gate = Field(default_factory=lambda: _gate(1.0, None, hard=False))
+    """1 when no checksum covers the bag's bytes (MCAP without chunk CRCs, SQLite, ROS 1)."""
+
+
 class VideoQA(_Strict):
     """Every encoded clip decoded again and compared with the frames fed to the encoder
     (:mod:`bagport.video.fidelity`); errors are measured on ``block_px`` block means."""
@@ -150,6 +155,7 @@ class QAConfig(_Strict):
     values: ValuesQA = Field(default_factory=ValuesQA)
     safety: SafetyQA = Field(default_factory=SafetyQA)
     content: ContentQA = Field(default_factory=ContentQA)
+    integrity: IntegrityQA = Field(default_factory=IntegrityQA)
     video: VideoQA = Field(default_factory=VideoQA)
 
 

@@ -18,8 +18,11 @@ from bagport.errors import BagportError
 __all__ = ["rewrite_publish_times"]
 
 
-def rewrite_publish_times(file: Path, publish_ns: Iterable[tuple[str, int, int]]) -> None:
-    """``publish_ns``: ``(topic, log_ns, publish_ns)`` per message; messages not listed keep theirs."""
+def rewrite_publish_times(
+    file: Path, publish_ns: Iterable[tuple[str, int, int]], *, crcs: bool = False
+) -> None:
+    """``publish_ns``: ``(topic, log_ns, publish_ns)`` per message; messages not listed keep theirs.
+    The file is written with chunk CRCs; ``crcs`` adds a data-section CRC and makes 64 KiB chunks."""
     wanted: dict[tuple[str, int], list[int]] = defaultdict(list)
     for topic, log_ns, publish in publish_ns:
         wanted[(topic, log_ns)].append(publish)
@@ -27,7 +30,8 @@ def rewrite_publish_times(file: Path, publish_ns: Iterable[tuple[str, int, int]]
     with file.open("rb") as source, scratch.open("wb") as target:
         reader = make_reader(source)
         header = reader.get_header()
-        writer = Writer(target, compression=CompressionType.NONE)
+        chunk_size = 64 * 1024 if crcs else 1024 * 1024
+        writer = Writer(target, chunk_size, CompressionType.NONE, enable_crcs=True, enable_data_crcs=crcs)
         writer.start(profile=header.profile, library=header.library)
         summary = reader.get_summary()
         if summary is None:

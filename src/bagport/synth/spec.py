@@ -70,6 +70,9 @@ class EpisodeSpec:
     publish_lag_ns: int | None = None
     """MCAP only: ``publish_time`` = capture time + this (a recorder that stores send times);
     ``None``: ``publish_time`` = log time, as rosbags writes it."""
+    mcap_crcs: bool = False
+    """MCAP only: re-write the file with the ``mcap`` library's writer, in 64 KiB chunks with chunk and
+    data-section CRC-32s (as rosbag2's MCAP plugin writes them by default); rosbags' writer leaves them 0."""
 
     JOINT_TOPIC = "/joint_states"
     ACTION_TOPIC = "/cmd"

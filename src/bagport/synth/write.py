@@ -246,10 +246,13 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
             writer.write(conns[topic], log_ns, msgs.serialize(msg, types[topic]))
     finally:
         writer.close()
-    if storage == "mcap" and spec.publish_lag_ns is not None:
+    if storage == "mcap" and (spec.publish_lag_ns is not None or spec.mcap_crcs):
         lag_ns = spec.publish_lag_ns
         for file in sorted(path.glob("*.mcap")):
-            rewrite_publish_times(file, ((t, log, stamp + lag_ns) for log, t, _, stamp in _events(truth)))
+            times = (
+                () if lag_ns is None else ((t, log, stamp + lag_ns) for log, t, _, stamp in _events(truth))
+            )
+            rewrite_publish_times(file, times, crcs=spec.mcap_crcs)
     return truth
 
 

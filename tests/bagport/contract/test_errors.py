@@ -62,6 +62,33 @@ def test_fps_must_be_a_positive_integer(fps: str) -> None:
     )
 
 
+def test_fps_above_the_limit_is_refused_at_load() -> None:
+    _raises(
+        f"robot_type: r\nfps: 100000\nobservations:\n  - {{key: s, topic: /a, type: {FLOAT}}}\n",
+        r"^robot\.yaml:2 \(fps\): fps 100000 is above 1000 .* Fix: .*from 1 to 1000",
+    )
+    parse_contract(f"robot_type: r\nfps: 1000\nobservations:\n  - {{key: s, topic: /a, type: {FLOAT}}}\n")
+
+
+@pytest.mark.parametrize(
+    ("size", "match"),
+    [
+        ("[100000, 100000]", r"resize \[100000, 100000\] asks for frames larger than 8192 pixels a side"),
+        ("[240, 9000]", r"larger than 8192 pixels a side"),
+        ("[0, 320]", r"greater than 0"),
+    ],
+)
+def test_image_resize_is_bounded_at_load(size: str, match: str) -> None:
+    text = (
+        "robot_type: r\nobservations:\n  - key: observation.images.a\n    topic: /a\n"
+        f"    type: sensor_msgs/msg/Image\n    image: {{resize: {size}}}\n"
+    )
+    _raises(
+        text, r"^robot\.yaml:6 \(observations\[0\]\.image\.resize.*\): .*" + match + r".* Fix: image\.resize"
+    )
+    parse_contract(text.replace(size, "[8192, 8192]"))
+
+
 def test_key_containing_a_slash() -> None:
     _raises(
         f"robot_type: r\nobservations:\n  - {{key: s, topic: /a, type: {FLOAT}}}\n"

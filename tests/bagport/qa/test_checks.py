@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -19,7 +20,7 @@ SMALL_CAMERAS = (
     CameraSpec("front", "raw", "bgr8", height=48, width=64),
     CameraSpec("wrist", "jpeg", height=48, width=64),
 )
-BASE = EpisodeSpec(duration_s=3.0, cameras=SMALL_CAMERAS)
+BASE = EpisodeSpec(duration_s=3.0, cameras=SMALL_CAMERAS, mcap_crcs=True)  # checksummed: no integrity warning
 
 
 def _request(
@@ -68,7 +69,7 @@ def test_clean_episode_passes_every_check_including_images(tmp_path: Path) -> No
     assert summary.qa["verdict"] == "pass"
     assert _check(qa, "time.output_monotonic", "episode").value == 0
     groups = {c.check.split(".")[0] for c in qa.checks}
-    assert groups == {"coverage", "rates", "time", "values", "content", "video"}
+    assert groups == {"coverage", "rates", "time", "values", "content", "integrity", "video"}
     fidelity = qa.plots["fidelity"]
     assert set(fidelity) == {"observation.images.front", "observation.images.wrist"}
     for key, clip in fidelity.items():
@@ -236,4 +237,40 @@ def test_image_content_checks_during_conversion(
     found = _check(qa, check, subject)
     assert found.verdict == "warn"
     assert found.value >= (14 if check.endswith("frames") else 1.4)
+    assert summary.qa["verdict"] == "warn"
+
+
+@pytest.mark.parametrize(
+    ("storage", "crcs", "says"),
+    [
+        ("mcap", False, r"MCAP without chunk CRCs .*Fix: record chunked MCAP with CRCs: .*`noCRC: false`"),
+        (
+            "sqlite3",
+            False,
+            r"rosbag2 SQLite \(\.db3\) bags carry no checksums.*Fix: record with `ros2 bag record -s mcap`",
+        ),
+        ("ros1", False, r"ROS 1 bags carry no checksums.*Fix: "),
+        ("mcap", True, r"checksums verified on read: MCAP chunk CRC-32s"),
+    ],
+    ids=["mcap-without-crcs", "sqlite3", "ros1", "mcap-with-crcs"],
+)
+def test_a_bag_without_checksums_is_a_warning_that_does_not_fail_the_episode(
+    tmp_path: Path, storage: str, crcs: bool, says: str
+) -> None:
+    bag = tmp_path / ("ep.bag" if storage == "ros1" else "ep")
+    write_episode_bag(bag, storage, replace(BASE, mcap_crcs=crcs))  # type: ignore[arg-type]
+    result = score_bag(_request(bag, tmp_path))
+    check = _check(result, "integrity.unchecked", "bag")
+    assert re.search(says, check.reason), check.reason
+    assert (check.verdict, check.hard) == (("pass", False) if crcs else ("warn", False))
+    assert result.verdict == ("pass" if crcs else "warn")  # a warning, never a failure
+
+
+def test_a_converted_episode_carries_the_no_checksum_warning(tmp_path: Path) -> None:
+    bag = tmp_path / "ep.bag"
+    write_episode_bag(bag, "ros1", replace(BASE, duration_s=1.5))
+    summary = convert_episode(_request(bag, tmp_path))
+    qa = EpisodeQA.from_dict(json.loads((Path(summary.dir_uri) / "qa.json").read_text()))
+    check = _check(qa, "integrity.unchecked", "bag")
+    assert check.verdict == "warn" and "ROS 1 bags carry no checksums" in check.reason
     assert summary.qa["verdict"] == "warn"

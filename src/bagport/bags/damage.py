@@ -1,0 +1,116 @@
+"""A damaged bag as one error: what failed, where (file and byte offset, or the last intact message),
+the topics concerned, and the fix. Never the storage library's exception on its own."""
+
+from __future__ import annotations
+
+import sqlite3
+import struct
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+from typing import Any
+
+import apsw
+from backports import zstd
+from rosbags.highlevel import AnyReaderError
+from rosbags.rosbag1 import ReaderError as Ros1ReaderError
+from rosbags.rosbag2 import ReaderError as Ros2ReaderError
+
+from bagport.bags.locate import locate_damage
+from bagport.bags.records import Storage
+from bagport.bags.remote import RemotePath
+from bagport.errors import BagReadError
+
+__all__ = ["STORAGE_ERRORS", "checked_records", "damaged_bag"]
+
+STORAGE_ERRORS = (
+    AnyReaderError,
+    Ros1ReaderError,
+    Ros2ReaderError,
+    apsw.Error,
+    sqlite3.Error,
+    OSError,
+    ValueError,
+    KeyError,
+    IndexError,
+    EOFError,
+    AssertionError,  # rosbags checks a ROS 1 record against its index with assert
+    RuntimeError,  # lz4 decompression
+    struct.error,
+    zstd.ZstdError,
+)
+"""What rosbags and the storage libraries under it raise on a damaged or truncated bag."""
+
+_REINDEX = "reindex the bag (`rosbag reindex` for ROS 1, `ros2 bag reindex` for rosbag2)."
+_FIXES = {
+    Storage.MCAP: "copy the file again from the robot or a backup (its bytes changed after recording); "
+    "`mcap doctor FILE` lists the damaged records, `mcap recover FILE -o FIXED.mcap` keeps the intact ones.",
+    Storage.SQLITE3: "copy the bag again from the robot or a backup; without one, "
+    "`sqlite3 FILE .recover | sqlite3 FIXED.db3` salvages the intact rows (then `ros2 bag reindex` the folder).",
+    Storage.ROS1: "copy the bag again from the robot or a backup; if only its index is damaged "
+    "(the messages are intact), `rosbag reindex` rebuilds it.",
+}
+
+BagFile = Path | RemotePath
+
+
+def _one_line(err: BaseException) -> str:
+    text = " ".join(str(err).split())
+    return (
+        f"{type(err).__name__}: {text}"
+        if text and not isinstance(err, BagReadError)
+        else text or type(err).__name__
+    )
+
+
+def damaged_bag(
+    err: BaseException,
+    *,
+    uri: str,
+    storage: Storage,
+    files: Iterable[BagFile],
+    action: str,
+    last: tuple[str, int] | None = None,
+) -> BagReadError:
+    """The error for a bag whose ``action`` ("cannot be opened", "reading failed") raised ``err``;
+    walks ``files`` to name the damaged record. ``last``: (topic, log_ns) of the last intact message."""
+    damage = locate_damage(storage, list(files))
+    what = f"{action} ({_one_line(err)})"
+    if damage is not None:
+        what += f"; damage found in {damage.describe()}"
+    if last is not None:
+        what += f"; the last intact message read was on {last[0]} at log time {last[1]} ns"
+    topics = damage.topics if damage is not None else ()
+    topic = topics[0] if len(topics) == 1 else last[0] if last is not None and not topics else None
+    index_only = damage is None and "index" in str(err).lower()
+    return BagReadError(what, uri=uri, topic=topic, fix=_REINDEX if index_only else _FIXES[storage])
+
+
+def checked_records(
+    records: Iterable[tuple[Any, Any, Any]], *, uri: str, storage: Storage, files: Iterable[BagFile]
+) -> Iterator[tuple[Any, int, bytes | memoryview]]:
+    """rosbags' ``(connection, log_ns, raw)`` records, each checked for its types (a damaged SQLite
+    row can hold an integer where the payload belongs); any storage failure becomes :func:`damaged_bag`."""
+    last: tuple[str, int] | None = None
+    iterator = iter(records)
+    while True:
+        try:
+            record = next(iterator)
+        except StopIteration:
+            return
+        except STORAGE_ERRORS as err:
+            raise damaged_bag(
+                err, uri=uri, storage=storage, files=files, action="reading failed", last=last
+            ) from err
+        conn, log_ns, raw = record
+        if not isinstance(log_ns, int) or not isinstance(raw, bytes | memoryview):
+            field, value = ("log time", log_ns) if not isinstance(log_ns, int) else ("payload", raw)
+            where = f" after log time {last[1]} ns" if last is not None else ""
+            raise BagReadError(
+                f"the message record on {conn.topic}{where} is damaged: its {field} is "
+                f"a {type(value).__name__}",
+                uri=uri,
+                topic=conn.topic,
+                fix=_FIXES[storage],
+            )
+        last = (conn.topic, log_ns)
+        yield conn, log_ns, raw

@@ -1,0 +1,66 @@
+"""Object-store outputs: a bucket that does not exist is an error before anything is converted, never a
+new bucket (on moto's real S3 HTTP endpoint, through s3fs)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from s3fs import S3FileSystem
+
+from bagport.config import ConvertConfig
+from bagport.errors import DatasetWriteError
+from bagport.run import plan_run
+from flows.cli import main
+from tests.helpers import SAMPLE_CONTRACT
+from tests.s3 import moto_s3
+
+
+def _manifest(tmp_path: Path) -> Path:
+    manifest = tmp_path / "manifest.yaml"
+    (tmp_path / "never_read.mcap").write_bytes(b"")  # bags are read by the workers, after these checks
+    manifest.write_text("bags:\n  - uri: never_read.mcap\n")
+    return manifest
+
+
+def test_output_in_a_missing_bucket_is_refused_and_no_bucket_is_made(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    manifest = _manifest(tmp_path)
+    with moto_s3():
+        fs = S3FileSystem()
+        fs.mkdir("real-bucket")
+        config = ConvertConfig(
+            manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output="s3://typo-bucket/out"
+        )
+        with pytest.raises(
+            DatasetWriteError, match=r"s3://typo-bucket/out: the bucket 'typo-bucket' does not exist"
+        ):
+            plan_run(config)
+        staged = config.model_copy(
+            update={"output": "s3://real-bucket/out", "staging": "s3://typo-staging/st"}
+        )
+        with pytest.raises(
+            DatasetWriteError, match=r"s3://typo-staging/st: the bucket 'typo-staging'.*Fix: "
+        ):
+            plan_run(staged)
+        plan = plan_run(config.model_copy(update={"output": "s3://real-bucket/out"}))
+        assert len(plan.requests) == 1  # an existing bucket passes (the bag is only read later)
+
+        code = main(
+            [
+                "convert",
+                "--manifest",
+                str(manifest),
+                "--contract",
+                str(SAMPLE_CONTRACT),
+                "--output",
+                "s3://typo-bucket/o",
+            ]
+        )
+        fs.invalidate_cache()
+        assert sorted(b.rstrip("/") for b in fs.ls("")) == ["real-bucket"]
+    err = capsys.readouterr().err
+    assert code == 2
+    assert "bagport convert: error: s3://typo-bucket/o: the bucket 'typo-bucket' does not exist" in err
+    assert "Traceback" not in err

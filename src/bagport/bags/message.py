@@ -6,6 +6,8 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
+from bagport.errors import DecodeError
+
 __all__ = ["BagMessage", "HeaderLayout"]
 
 _LE = struct.Struct("<iI")
@@ -57,7 +59,10 @@ class BagMessage:
     def msg(self) -> Any:
         """The deserialised message (a rosbags dataclass); cached."""
         if self._msg is None:
-            self._msg = self._deserialize(self._raw, self.msgtype)
+            try:
+                self._msg = self._deserialize(self._raw, self.msgtype)
+            except DecodeError as err:
+                raise err.located(uri=err.uri or "", topic=self.topic, t_ns=self.log_time_ns) from err
         return self._msg
 
     def header_stamp_ns(self) -> int | None:

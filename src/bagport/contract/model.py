@@ -22,6 +22,8 @@ from pydantic import (
     StrictInt,
 )
 
+from bagport.msgtypes import normalize_msgtype
+
 __all__ = [
     "ActionEntry",
     "AlignOptions",
@@ -41,14 +43,6 @@ __all__ = [
 _MSGTYPE = re.compile(r"^[A-Za-z][\w]*/(msg/)?[A-Za-z][\w]*$")
 
 
-def normalize_msgtype(msgtype: str) -> str:
-    """``sensor_msgs/Image`` (ROS 1 style) -> ``sensor_msgs/msg/Image``."""
-    parts = msgtype.strip().split("/")
-    if len(parts) == 2:
-        return f"{parts[0]}/msg/{parts[1]}"
-    return msgtype.strip()
-
-
 def _check_key(key: str) -> str:
     if not key or "/" in key:
         raise ValueError(
@@ -59,7 +53,10 @@ def _check_key(key: str) -> str:
 
 def _check_topic(topic: str) -> str:
     if not topic.startswith("/"):
-        raise ValueError(f"topic {topic!r} must be an absolute ROS topic name starting with '/'")
+        raise ValueError(
+            f"topic {topic!r} must be an absolute ROS topic name starting with '/' "
+            f"(a ROS 1 bag's relative {topic!r} is matched by '/{topic}')"
+        )
     return topic
 
 

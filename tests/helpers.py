@@ -57,11 +57,13 @@ def episode_request(
 
 
 def convert_in_process(bags: str, contract_text: str, tmp_path: Path, **options: Any) -> Path:
-    """Plan, convert every episode and reduce in this process (no Prefect): the dataset's folder.
+    """Plan, split bags into episodes, convert each and reduce in this process (no Prefect): the
+    dataset's folder.
     ``bags`` is a glob or a manifest; ``options`` are further :class:`ConvertConfig` fields."""
     from bagport.config import ConvertConfig  # noqa: PLC0415
     from bagport.episode import convert_episode  # noqa: PLC0415
     from bagport.run import plan_run, reduce_run  # noqa: PLC0415
+    from bagport.segment import segment_request  # noqa: PLC0415
 
     contract = tmp_path / "contract.yaml"
     contract.write_text(contract_text)
@@ -75,6 +77,7 @@ def convert_in_process(bags: str, contract_text: str, tmp_path: Path, **options:
         **{"on_qa_fail": "keep", **source, **options},
     )
     plan = plan_run(config)
-    staged = [convert_episode(request).dir_uri for request in plan.requests]
+    episodes = [episode for request in plan.requests for episode in segment_request(request).requests]
+    staged = [convert_episode(request).dir_uri for request in episodes]
     reduce_run(plan, staged)
     return out

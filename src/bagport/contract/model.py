@@ -171,7 +171,8 @@ class ScalarEntry(_Strict):
 class EpisodeEvents(_Strict):
     """An event topic whose messages split a bag into episodes (``START``, ``SUCCESS``, ``FAIL``,
     ``DISCARD``, ``RESET``): a ``std_msgs/String`` holding the event name or JSON
-    ``{"event": ..., "note": ...}``, or ``field`` (a dot path) of any message."""
+    ``{"event_type": ..., "note": ..., "stamp": ..., "episode_id": ...}`` (``event`` / ``type`` too),
+    or ``field`` (a dot path; default ``data``, else ``event_type``) of any message."""
 
     topic: Topic
     type: MsgType = "std_msgs/msg/String"
@@ -179,6 +180,9 @@ class EpisodeEvents(_Strict):
     """Dot path to the event name; default ``data``."""
     note_field: str | None = None
     """Dot path to a free-text note (JSON strings carry it as ``note``)."""
+    time: Literal["stamp", "log"] = "stamp"
+    """An event's time: its own ``stamp`` when it carries one (JSON key or message field), else the
+    bag's log time; ``log`` always uses the log time."""
 
 
 class DoneSignal(_Strict):

@@ -1,8 +1,9 @@
 """The dataset's QA record: ``meta/qa/`` beside (never inside) ``info.json``.
 
 ```
-meta/qa/chunk-000/file-000.parquet   one row per episode and check (value, verdict, reason)
-meta/qa/summary.json                 per bag: episode index (null when excluded), score, verdict, reason
+meta/qa/chunk-000/file-000.parquet   one row per episode and check (value, verdict, reason, robot_id)
+meta/qa/summary.json                 per bag: episode index (null when excluded), score, verdict, reason,
+                                     metadata (manifest columns such as robot_id, the events' episode_id)
 meta/qa/report.html                  the self-contained report (see bagport.qa.report)
 ```
 Excluded bags and bags that could not be converted are listed too, with the reason.
@@ -38,6 +39,7 @@ _QA_FIELDS: list[tuple[str, pa.DataType]] = [
     ("verdict", pa.string()),
     ("hard", pa.bool_()),
     ("reason", pa.string()),
+    ("robot_id", pa.string()),
 ]
 QA_SCHEMA = pa.schema(_QA_FIELDS)
 
@@ -55,6 +57,7 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
             "verdict",
             "hard",
             "reason",
+            "robot_id",
         )
     }
     for entry in entries:
@@ -68,6 +71,8 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
             rows["verdict"].append(check.verdict)
             rows["hard"].append(check.hard)
             rows["reason"].append(check.reason)
+            robot = entry.metadata.get("robot_id")
+            rows["robot_id"].append(None if robot is None else str(robot))
     return pa.table(rows, schema=QA_SCHEMA)
 
 

@@ -176,3 +176,32 @@ def test_matching_msg_path_definition_reads(tmp_path: Path) -> None:
         str(bag), msg_definitions={"acme_msgs/msg/Gauge": "float64 value\nstring label\n"}
     ) as reader:
         assert [(m.msg().value, m.msg().label) for m in reader.messages(["/gauge"])] == [(1.5, "psi")] * 3
+
+
+def test_an_empty_placeholder_definition_of_a_standard_type_reads_with_the_bundled_one(
+    tmp_path: Path,
+) -> None:
+    """A recorder that had no definition for ``rcl_interfaces/msg/Log`` embedded an empty one: the bytes are
+    read with the bundled Humble definition (before: "CDR message size mismatch", no topic, no fix)."""
+    log = T["rcl_interfaces/msg/Log"](
+        stamp=T["builtin_interfaces/msg/Time"](sec=1, nanosec=2),
+        level=20,
+        name="talker",
+        msg="Publishing: 'Hello, world! 0'",
+        file="talker.cpp",
+        function="main",
+        line=38,
+    )
+    payload = bytes(STORE.serialize_cdr(log, "rcl_interfaces/msg/Log"))
+    bag = _mcap(
+        tmp_path / "rosout.mcap",
+        {"/rosout": ("rcl_interfaces/msg/Log", "ros2msg", b"")},
+        {"/rosout": [payload]},
+    )
+    with open_bag(str(bag)) as reader:
+        (message,) = list(reader.messages(["/rosout"]))
+        assert (message.msg().name, message.msg().msg, message.msg().line) == (
+            "talker",
+            "Publishing: 'Hello, world! 0'",
+            38,
+        )

@@ -19,6 +19,7 @@ from bagport.contract.draft import draft_contract
 from bagport.episode.score import score_manifest
 from bagport.errors import DecodeError
 from bagport.feature_table import describe_features
+from bagport.segment import segment_request
 from tests.bagport.decode.bagwriter import write_bag
 from tests.helpers import convert_in_process
 
@@ -258,3 +259,24 @@ def test_real_talker_bags_when_present(tmp_path: Path) -> None:
     for folder in found:
         with open_bag(str(folder)) as reader:
             assert len(list(reader.messages(["/topic"]))) == 10
+
+
+def test_ros1_relative_event_topic_splits_episodes(tmp_path: Path) -> None:
+    from tests.helpers import episode_request  # noqa: PLC0415
+
+    ticks = [START_NS + k * PERIOD_NS for k in range(40)]
+    events = [(ticks[5], "START"), (ticks[25], "SUCCESS")]
+    string = TS1.types["std_msgs/msg/String"]
+    streams = [
+        (
+            "joint_states",
+            "sensor_msgs/msg/JointState",
+            [(t, _joints(TS1, t, k)) for k, t in enumerate(ticks)],
+        ),
+        ("episode_events", "std_msgs/msg/String", [(t, string(data=text)) for t, text in events]),
+    ]
+    bag = write_bag(tmp_path / "relative", "ros1", TS1, streams)
+    contract = _contract("/joint_states") + "episodes:\n  events: {topic: /episode_events}\n"
+    describe_features(parse_contract(contract, "c.yaml"), str(bag))  # contract check --bag passes
+    found = segment_request(episode_request(bag, tmp_path / "staging", contract))
+    assert [(r.start_ns, r.end_ns, r.label) for r in found.requests] == [(ticks[5], ticks[25], "success")]

@@ -12,7 +12,15 @@ SAMPLE_CONTRACT = REPO / "configs" / "contracts" / "sample_robot.yaml"
 FAST_CODEC = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 """Near-lossless and quick: for tests that check pixels exactly, not the default codec."""
 
-__all__ = ["FAST_CODEC", "REALBAGS", "REPO", "SAMPLE_CONTRACT", "episode_request", "realbag"]
+__all__ = [
+    "FAST_CODEC",
+    "REALBAGS",
+    "REPO",
+    "SAMPLE_CONTRACT",
+    "convert_in_process",
+    "episode_request",
+    "realbag",
+]
 
 
 def realbag(relative: str) -> Path:
@@ -46,3 +54,30 @@ def episode_request(
         encoder=codec,
         default_task=task,
     )
+
+
+def convert_in_process(bags: str, contract_text: str, tmp_path: Path, **options: Any) -> Path:
+    """Plan, split bags into episodes, convert each and reduce in this process (no Prefect): the
+    dataset's folder.
+    ``bags`` is a glob or a manifest; ``options`` are further :class:`ConvertConfig` fields."""
+    from bagport.config import ConvertConfig  # noqa: PLC0415
+    from bagport.episode import convert_episode  # noqa: PLC0415
+    from bagport.run import plan_run, reduce_run  # noqa: PLC0415
+    from bagport.segment import segment_request  # noqa: PLC0415
+
+    contract = tmp_path / "contract.yaml"
+    contract.write_text(contract_text)
+    out = tmp_path / "dataset"
+    source = {"manifest": bags} if bags.endswith((".yaml", ".yml", ".csv")) else {"bags_glob": bags}
+    config = ConvertConfig(
+        contract=str(contract),
+        output=str(out),
+        staging=str(tmp_path / "staging"),
+        encoder=FAST_CODEC,
+        **{"on_qa_fail": "keep", **source, **options},
+    )
+    plan = plan_run(config)
+    episodes = [episode for request in plan.requests for episode in segment_request(request).requests]
+    staged = [convert_episode(request).dir_uri for request in episodes]
+    reduce_run(plan, staged)
+    return out

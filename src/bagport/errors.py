@@ -52,12 +52,24 @@ class ManifestError(BagportError):
     """The manifest of bags is malformed or names bags that cannot be found."""
 
     def __init__(
-        self, what: str, *, file: str | None = None, entry: int | None = None, fix: str = ""
+        self,
+        what: str,
+        *,
+        file: str | None = None,
+        entry: int | None = None,
+        fix: str = "",
+        row: int | None = None,
+        column: str | None = None,
     ) -> None:
         self.file = file
         self.entry = entry
+        self.row = row
+        """Line of a CSV manifest (the header is row 1); a CSV entry is named by its row, not ``bags[i]``."""
+        self.column = column
         where = f"{file}" if file else "manifest"
-        if entry is not None:
+        if row is not None:
+            where += f", row {row}" + (f" (column {column})" if column else "")
+        elif entry is not None:
             where += f", bags[{entry}]"
         super().__init__(f"{where}: {what}" + (f" Fix: {fix}" if fix else ""))
 

@@ -10,7 +10,8 @@ bags:
     start_s: 12.5                    #   first message (start_s/end_s) or in ROS time (start_ns/end_ns);
     end_s: 47.0                      #   the same bag may be listed again with another window
 ```
-Relative paths are relative to the manifest file.
+Relative paths are relative to the manifest file. A ``.csv`` manifest holds the same entries as a
+header row and one row per bag, its other columns as metadata (:mod:`bagport.manifest_csv`).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ import yaml
 from fsspec.core import url_to_fs
 
 from bagport.errors import ManifestError
+from bagport.manifest_csv import csv_entries
 from bagport.uris import is_local, protocol_of
 from bagport.yamlsource import load_yaml, primary_error
 
@@ -97,11 +99,13 @@ def _absolute(uri: str, base_dir: str) -> str:
     return f"{protocol}://{posixpath.normpath(posixpath.join(path, uri))}"
 
 
-def _expand(uri: str, entry: int, source: str, storage_options: dict[str, Any]) -> list[str]:
+def _expand(uri: str, where: dict[str, Any], source: str, storage_options: dict[str, Any]) -> list[str]:
+    """The bags ``uri`` names (a glob expands); ``where`` locates the entry (``entry``, or ``row`` and
+    ``column`` for a CSV manifest) in errors."""
     try:
         fs, path = url_to_fs(uri, **storage_options)
     except (ImportError, ValueError) as err:
-        raise ManifestError(f"uri {uri!r} cannot be opened: {err}", file=source, entry=entry) from err
+        raise ManifestError(f"uri {uri!r} cannot be opened: {err}", file=source, **where) from err
     prefix = "" if is_local(fs) else f"{protocol_of(fs)}://"
     try:
         if _GLOB_CHARS & set(path):
@@ -110,7 +114,7 @@ def _expand(uri: str, entry: int, source: str, storage_options: dict[str, Any]) 
                 raise ManifestError(
                     f"glob {uri!r} matches no bag",
                     file=source,
-                    entry=entry,
+                    **where,
                     fix="check the pattern and the folder.",
                 )
             return [prefix + p if prefix and not p.startswith(prefix) else p for p in found]
@@ -118,20 +122,38 @@ def _expand(uri: str, entry: int, source: str, storage_options: dict[str, Any]) 
             raise ManifestError(
                 f"bag {uri!r} does not exist",
                 file=source,
-                entry=entry,
+                **where,
                 fix="fix the path (relative paths are relative to the manifest file) or remove the entry.",
             )
     except ManifestError:
         raise
     except (PermissionError, OSError) as err:
-        raise ManifestError(f"bag {uri!r} cannot be reached: {err}", file=source, entry=entry) from err
+        raise ManifestError(f"bag {uri!r} cannot be reached: {err}", file=source, **where) from err
     return [uri]
 
 
-def parse_manifest(
-    text: str, source: str = "manifest", *, base_dir: str = "", storage_options: dict[str, Any] | None = None
-) -> Manifest:
-    """Validate manifest YAML and expand globs; every error names the entry."""
+def _csv_model(text: str, source: str) -> tuple[list[_Entry], list[int]]:
+    """The entries of a CSV manifest and their row numbers; errors name the row and the column."""
+    entries: list[_Entry] = []
+    rows: list[int] = []
+    for row, data in csv_entries(text, source):
+        try:
+            entries.append(_Entry.model_validate(data))
+        except pydantic.ValidationError as err:
+            first = primary_error(err)
+            column = str(first["loc"][0]) if first["loc"] else None
+            raise ManifestError(
+                f"{first['msg']}" + (f" (cell {data.get(column)!r})" if column in data else ""),
+                file=source,
+                row=row,
+                column=column,
+                fix="fix the cell; start_s/end_s are seconds from the bag's first message, uri is required.",
+            ) from err
+        rows.append(row)
+    return entries, rows
+
+
+def _yaml_model(text: str, source: str) -> _Manifest:
     try:
         parsed = load_yaml(text, source)
     except yaml.YAMLError as err:
@@ -150,18 +172,35 @@ def parse_manifest(
             entry=entry,
             fix="a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries.",
         ) from err
+    return model
+
+
+def parse_manifest(
+    text: str, source: str = "manifest", *, base_dir: str = "", storage_options: dict[str, Any] | None = None
+) -> Manifest:
+    """Validate a manifest (YAML, or CSV when ``source`` ends in ``.csv``) and expand globs; every error
+    names the entry (``bags[i]``, or a CSV row and column)."""
+    rows: list[int] | None = None
+    if source.lower().endswith(".csv"):
+        items, rows = _csv_model(text, source)
+    else:
+        items = _yaml_model(text, source).bags
     bags: list[BagEntry] = []
     seen: dict[tuple[str, str], int] = {}
-    for index, item in enumerate(model.bags):
+    for index, item in enumerate(items):
         uri = _absolute(item.uri, base_dir)
         window = item.window()
-        for found in _expand(uri, index, source, dict(storage_options or {})):
+        where: dict[str, Any] = (
+            {"entry": index} if rows is None else {"entry": index, "row": rows[index], "column": "uri"}
+        )
+        for found in _expand(uri, where, source, dict(storage_options or {})):
             key = (found, repr(sorted(window.items())))
             if key in seen:
+                also = f"bags[{seen[key]}]" if rows is None else f"row {rows[seen[key]]}"
                 raise ManifestError(
-                    f"bag {found!r} is listed twice (also bags[{seen[key]}])",
+                    f"bag {found!r} is listed twice (also {also})",
                     file=source,
-                    entry=index,
+                    **where,
                     fix="remove the duplicate; one bag (or one window of it: start_s/end_s) is one episode.",
                 )
             seen[key] = index

@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import fsspec
@@ -68,11 +68,18 @@ class EpisodeFailure:
     segment: int | None = None
     label: str | None = None
     note: str = ""
+    metadata: dict[str, Any] = field(default_factory=dict)
 
     @classmethod
     def of(cls, request: EpisodeRequest, error: str) -> EpisodeFailure:
         return cls(
-            request.bag_uri, request.manifest_entry, error, request.segment, request.label, request.note
+            request.bag_uri,
+            request.manifest_entry,
+            error,
+            request.segment,
+            request.label,
+            request.note,
+            dict(request.metadata),
         )
 
 
@@ -209,6 +216,7 @@ class _Episode:
     segment: int | None
     label: str | None
     note: str
+    metadata: dict[str, Any]
 
 
 def _read_qa(summary: EpisodeSummary) -> EpisodeQA:
@@ -232,10 +240,16 @@ def select_episodes(
     policy = plan.qa.on_fail
     keep_labelled = plan.config.keep_failed
     rows: list[tuple[int, EpisodeQA, EpisodeSummary | None, _Episode]] = [
-        (s.manifest_entry, _read_qa(s), s, _Episode(s.segment, s.label, s.note)) for s in summaries
+        (s.manifest_entry, _read_qa(s), s, _Episode(s.segment, s.label, s.note, s.metadata))
+        for s in summaries
     ]
     rows += [
-        (f.manifest_entry, EpisodeQA.failed(f.bag_uri, f.error), None, _Episode(f.segment, f.label, f.note))
+        (
+            f.manifest_entry,
+            EpisodeQA.failed(f.bag_uri, f.error),
+            None,
+            _Episode(f.segment, f.label, f.note, f.metadata),
+        )
         for f in failures
     ]
     rows.sort(key=lambda row: (row[0], row[1].bag_uri, -1 if row[3].segment is None else row[3].segment))
@@ -267,7 +281,15 @@ def select_episodes(
         else:
             row = QAEntry(qa, entry, len(kept))
             kept.append(summary)
-        entries.append(replace(row, segment=episode.segment, label=episode.label, note=episode.note))
+        entries.append(
+            replace(
+                row,
+                segment=episode.segment,
+                label=episode.label,
+                note=episode.note,
+                metadata=episode.metadata,
+            )
+        )
     if not kept:
         reasons = "\n".join(
             f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries

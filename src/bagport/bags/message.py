@@ -67,6 +67,8 @@ class BagMessage:
         if self._msg is None:
             try:
                 self._msg = self._deserialize(self._raw, self.msgtype)
+            except DecodeError as err:
+                raise err.located(uri=self.uri or "", topic=self.topic, t_ns=self.log_time_ns) from err
             except _DAMAGED as err:
                 raise DecodeError(
                     f"the {len(self._raw)}-byte message does not deserialise as {self.msgtype} "

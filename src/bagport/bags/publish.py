@@ -17,6 +17,7 @@ from mcap.reader import make_reader
 
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
+from bagport.msgtypes import global_topic
 
 __all__ = ["mcap_publish_times_ns"]
 
@@ -28,13 +29,16 @@ def mcap_publish_times_ns(
 ) -> dict[str, tuple[Int64Array, Int64Array]]:
     """Per topic: ``(log_ns, publish_ns)`` sorted by log time (ties keep file order), from the
     bag's ``.mcap`` files (local, or remote and read through the same ranged reads and spill)."""
-    wanted = tuple(topics)
+    wanted = tuple(global_topic(t) for t in topics)
+    recorded = [*wanted, *(t.removeprefix("/") for t in wanted)]  # a relative name is the global one
     pairs: dict[str, list[tuple[int, int]]] = {t: [] for t in wanted}
     try:
         for file in files:
             with file.open("rb") as handle:
-                for _, channel, message in make_reader(handle).iter_messages(topics=list(wanted)):
-                    pairs[channel.topic].append((int(message.log_time), int(message.publish_time)))
+                for _, channel, message in make_reader(handle).iter_messages(topics=recorded):
+                    pairs[global_topic(channel.topic)].append(
+                        (int(message.log_time), int(message.publish_time))
+                    )
     except (McapError, OSError, ValueError) as err:
         raise BagReadError(
             f"publish times cannot be read ({type(err).__name__}: {err})",

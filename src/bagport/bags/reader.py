@@ -27,8 +27,14 @@ from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
 from bagport.bags.typeload import TolerantAnyReader, is_service_event
-from bagport.bags.typesources import complete_typestore, parse_msg_definitions, undefined_type_error
+from bagport.bags.typesources import (
+    CheckedDeserializer,
+    complete_bag_types,
+    parse_msg_definitions,
+    undefined_type_error,
+)
 from bagport.errors import BagportError, BagReadError, TransientError
+from bagport.msgtypes import global_topic, normalize_msgtype
 from bagport.scratch import scratch_dir
 from bagport.uris import is_local
 from bagport.yamlsource import load_plain
@@ -113,8 +119,11 @@ class RosbagsReader:
             store_key = f"{store}:{json.dumps(sorted((msg_definitions or {}).items()))}"
             self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled, store_key=store_key)
             self._reader.open()
-            msgtypes = {c.msgtype for c in self._reader.connections}
-            lacking = complete_typestore(self._reader.typestore, msgtypes, extra, bundled)
+            msgtypes = {normalize_msgtype(c.msgtype) for c in self._reader.connections}
+            lacking, sources = complete_bag_types(
+                self._reader, msgtypes, extra, bundled, store.name.replace("_", " ")
+            )
+            self._deserialize = CheckedDeserializer(uri, self._reader.deserialize, sources)
         except BagportError:
             self.close()
             raise
@@ -129,8 +138,9 @@ class RosbagsReader:
             raise
         counts: dict[str, tuple[str, int]] = {}
         for conn in self._reader.connections:
-            msgtype, count = counts.get(conn.topic, (conn.msgtype, 0))
-            counts[conn.topic] = (msgtype, count + int(conn.msgcount))
+            topic = global_topic(conn.topic)
+            msgtype, count = counts.get(topic, (normalize_msgtype(conn.msgtype), 0))
+            counts[topic] = (msgtype, count + int(conn.msgcount))
         self._promised = {topic: count for topic, (_, count) in counts.items()}
         message_count = int(self._reader.message_count)
         size_bytes = sum(p.stat().st_size for p in plan.files)
@@ -170,7 +180,10 @@ class RosbagsReader:
 
     @property
     def undefined_types(self) -> dict[str, str]:
-        return {c.topic: c.msgtype for c in self._reader.connections if c.msgtype in self._lacking}
+        conns = self._reader.connections
+        return {
+            global_topic(c.topic): t for c in conns if (t := normalize_msgtype(c.msgtype)) in self._lacking
+        }
 
     def _header_layout(self, msgtype: str) -> str | None:
         fields = self._reader.typestore.fielddefs.get(msgtype)
@@ -180,25 +193,27 @@ class RosbagsReader:
         return self._layout if nodetype == Nodetype.NAME and detail == _HEADER else None
 
     def _connections(self, topics: Sequence[str] | None) -> list[Any]:
-        """Connections to read: the requested topics, or every data topic (no service events,
-        no types that could not be loaded). A requested topic of an unloadable type is an error."""
+        """Connections to read: the requested topics (global names: ``/joint_states`` also reads a
+        ROS 1 bag's relative ``joint_states``), or every data topic (no service events, no types that
+        could not be loaded). A requested topic of an unloadable type is an error."""
         unloadable: dict[str, str] = self._reader.unloadable
         if topics is None:
             return [
                 c
                 for c in self._reader.connections
-                if c.msgtype not in unloadable and not is_service_event(c.topic, c.msgtype)
+                if normalize_msgtype(c.msgtype) not in unloadable and not is_service_event(c.topic, c.msgtype)
             ]
-        wanted = frozenset(topics)
-        conns = [c for c in self._reader.connections if c.topic in wanted]
+        wanted = frozenset(global_topic(t) for t in topics)
+        conns = [c for c in self._reader.connections if global_topic(c.topic) in wanted]
         for conn in conns:
-            if conn.msgtype in unloadable:
+            msgtype = normalize_msgtype(conn.msgtype)
+            if msgtype in unloadable:
                 raise BagReadError(
-                    f"topic {conn.topic} has type {conn.msgtype}, which cannot be loaded: "
-                    f"{unloadable[conn.msgtype]}",
+                    f"topic {global_topic(conn.topic)} has type {msgtype}, which cannot be loaded: "
+                    f"{unloadable[msgtype]}",
                     uri=self._uri,
-                    topic=conn.topic,
-                    fix="provide the type's .msg definition, or drop the topic from the contract.",
+                    topic=global_topic(conn.topic),
+                    fix="provide the type's .msg definition with --msg-path, or drop the topic from the contract.",
                 )
         return conns
 
@@ -208,12 +223,13 @@ class RosbagsReader:
         conns = self._connections(topics)
         if not conns:
             return
-        for conn in conns:
-            if conn.msgtype in self._lacking:
-                raise undefined_type_error(self._uri, conn.topic, conn.msgtype, self._lacking[conn.msgtype])
-        layouts = {c.msgtype: self._header_layout(c.msgtype) for c in conns}
-        deserialize = self._reader.deserialize
-        yielded = dict.fromkeys((c.topic for c in conns), 0)
+        names = {id(c): (global_topic(c.topic), normalize_msgtype(c.msgtype)) for c in conns}
+        for topic, msgtype in names.values():
+            if msgtype in self._lacking:
+                raise undefined_type_error(self._uri, topic, msgtype, self._lacking[msgtype])
+        layouts = {msgtype: self._header_layout(msgtype) for _, msgtype in names.values()}
+        deserialize = self._deserialize
+        yielded = dict.fromkeys((topic for topic, _ in names.values()), 0)
         records = checked_records(
             self._reader.messages(connections=conns, start=start_ns, stop=stop_ns),
             uri=self._uri,
@@ -221,19 +237,18 @@ class RosbagsReader:
             files=self._data_files,
         )
         for conn, log_ns, raw in records:
+            topic, msgtype = names[id(conn)]
             try:
                 payload = zstd.decompress(raw) if self._decompress else raw
             except zstd.ZstdError as err:
                 raise BagReadError(
-                    f"a message on {conn.topic} at log time {log_ns} ns does not decompress ({err})",
+                    f"a message on {topic} at log time {log_ns} ns does not decompress ({err})",
                     uri=self._uri,
-                    topic=conn.topic,
+                    topic=topic,
                     fix="copy the bag again from the robot or a backup; its bytes changed after recording.",
                 ) from err
-            yielded[conn.topic] += 1
-            yield BagMessage(
-                conn.topic, conn.msgtype, log_ns, payload, deserialize, layouts[conn.msgtype], self._uri
-            )
+            yielded[topic] += 1
+            yield BagMessage(topic, msgtype, log_ns, payload, deserialize, layouts[msgtype], self._uri)
         window = "" if start_ns is None and stop_ns is None else f" in [{start_ns}, {stop_ns}) ns"
         self._check_counts(yielded, self._promised_in(conns, start_ns, stop_ns), window)
 
@@ -246,7 +261,10 @@ class RosbagsReader:
         ):
             return self._promised
         try:
-            return window_counts(self._reader, conns, start_ns, stop_ns)
+            counts: dict[str, int] = {}
+            for topic, count in window_counts(self._reader, conns, start_ns, stop_ns).items():
+                counts[global_topic(topic)] = counts.get(global_topic(topic), 0) + count
+            return counts
         except (OSError, ValueError, KeyError, IndexError, struct.error) as err:
             raise BagReadError(
                 f"its message index cannot be read ({type(err).__name__}: {err})",

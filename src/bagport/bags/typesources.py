@@ -16,7 +16,7 @@ A type that no source defines is remembered, and reading its topic fails with
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Collection, Iterable, Mapping
 from typing import Any
 
 from fsspec.core import url_to_fs
@@ -24,9 +24,18 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import TypesysError, get_types_from_msg
 from rosbags.typesys.store import Typestore
 
-from bagport.errors import BagReadError
+from bagport.errors import BagReadError, DecodeError
 
-__all__ = ["complete_typestore", "parse_msg_definitions", "read_msg_path", "undefined_type_error"]
+__all__ = [
+    "CheckedDeserializer",
+    "complete_bag_types",
+    "complete_typestore",
+    "definition_sources",
+    "mismatch_error",
+    "parse_msg_definitions",
+    "read_msg_path",
+    "undefined_type_error",
+]
 
 Typesdict = dict[str, Any]
 """rosbags' parse trees: type name -> (constants, fields)."""
@@ -146,3 +155,93 @@ def undefined_type_error(uri: str, topic: str, msgtype: str, lacking: str) -> Ba
         "(and the types it uses); (2) record or re-write the bag with definitions embedded (MCAP, "
         "rosbag2 SQLite from Iron on, or ROS 1); (3) remove the topic from the contract if you do not need it.",
     )
+
+
+def definition_sources(
+    msgtypes: Iterable[str], embedded: Collection[str], fallback: Typestore, extra: Typesdict, bundle: str
+) -> dict[str, str]:
+    """``{msgtype: where its definition came from}``, in the precedence :func:`complete_typestore`
+    applies (said in an error when the definition does not match the recorded bytes)."""
+    sources: dict[str, str] = {}
+    for msgtype in msgtypes:
+        if msgtype in embedded:
+            sources[msgtype] = "the definition embedded in the bag"
+        elif msgtype in fallback.fielddefs:
+            sources[msgtype] = f"bagport's bundled {bundle} definition"
+        elif msgtype in extra:
+            sources[msgtype] = f"--msg-path ({msgtype}.msg)"
+    return sources
+
+
+def mismatch_error(uri: str, msgtype: str, source: str, err: Exception) -> DecodeError:
+    """A message whose bytes do not fit the definition it is read with: one paragraph, no dump."""
+    reason = " ".join(str(err).split())[:200].rstrip(".") or type(err).__name__
+    if source.startswith("--msg-path"):
+        fix = (
+            f"the {msgtype}.msg under --msg-path is not the definition the robot recorded with: use the "
+            "exact .msg of the recording's software version (same fields, same order, same types), "
+            "or remove the topic from the contract."
+        )
+    elif source.startswith("the bag's empty"):
+        fix = (
+            f"the recorder embedded no definition of {msgtype}: pass it as --msg-path DIR with "
+            f"DIR/{msgtype}.msg (and the types it uses), or remove the topic from the contract."
+        )
+    elif source.startswith("bagport's bundled"):
+        fix = (
+            "the robot used another version of this standard type (another ROS distribution): re-record "
+            "or re-write the bag with its definitions embedded (MCAP, or rosbag2 SQLite from Iron on), "
+            "or remove the topic from the contract."
+        )
+    else:
+        fix = (
+            "the message's bytes are damaged (copy the bag again from the robot or a backup, or leave this "
+            "moment out with the manifest entry's start_s/end_s), or, when every message of the topic "
+            "fails, the bag embeds a definition that is not the one its messages were written with: "
+            "re-write the bag with the right definition embedded, or remove the topic from the contract."
+        )
+    return DecodeError(
+        f"a message of type {msgtype} does not match {source} (the bytes do not fit: {reason})",
+        uri=uri,
+        fix=fix,
+    )
+
+
+def complete_bag_types(
+    reader: Any, msgtypes: set[str], extra: Typesdict, bundled: Typestore, bundle: str
+) -> tuple[dict[str, str], dict[str, str]]:
+    """Complete the type store of an open :class:`~bagport.bags.typeload.TolerantAnyReader`:
+    ``({msgtype: type defined nowhere}, {msgtype: where its definition came from})``.
+
+    ``--msg-path`` also defines a type whose embedded definition does not parse; a type whose
+    embedded definition is an empty placeholder and that no other source defines stays empty
+    (reading it then fails with :func:`mismatch_error`, which names the placeholder)."""
+    for msgtype in [t for t in reader.unloadable if t in extra]:
+        del reader.unloadable[msgtype]
+    embedded = set(reader.typestore.fielddefs)
+    lacking = complete_typestore(reader.typestore, msgtypes, extra, bundled)
+    empty: Typesdict = {t: ([], []) for t in reader.placeholders if lacking.get(t) == t}
+    if empty:
+        reader.typestore.register(empty)
+        lacking = complete_typestore(reader.typestore, msgtypes, extra, bundled)
+    sources = definition_sources(msgtypes, embedded, bundled, extra, bundle)
+    sources.update(dict.fromkeys(empty, "the bag's empty (placeholder) definition"))
+    return lacking, sources
+
+
+class CheckedDeserializer:
+    r"""rosbags' ``deserialize`` whose failures (bytes that do not fit the definition) are
+    :func:`mismatch_error`\ s naming where the definition came from, never a raw exception."""
+
+    def __init__(self, uri: str, deserialize: Callable[[Any, str], Any], sources: Mapping[str, str]) -> None:
+        self._uri = uri
+        self._deserialize = deserialize
+        self._sources = sources
+
+    def __call__(self, raw: bytes | memoryview, msgtype: str) -> Any:
+        try:
+            return self._deserialize(raw, msgtype)
+        except Exception as err:  # rosbags raises assorted types for bytes that do not fit
+            raise mismatch_error(
+                self._uri, msgtype, self._sources.get(msgtype, "its definition"), err
+            ) from err

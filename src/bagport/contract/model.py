@@ -22,6 +22,8 @@ from pydantic import (
     StrictInt,
 )
 
+from bagport.msgtypes import normalize_msgtype
+
 __all__ = [
     "ActionEntry",
     "AlignOptions",
@@ -47,14 +49,6 @@ MAX_FPS = 1000
 """Largest ``fps``: one frame per millisecond (the frame grid of a one-hour bag is then 3.6 M frames)."""
 
 
-def normalize_msgtype(msgtype: str) -> str:
-    """``sensor_msgs/Image`` (ROS 1 style) -> ``sensor_msgs/msg/Image``."""
-    parts = msgtype.strip().split("/")
-    if len(parts) == 2:
-        return f"{parts[0]}/msg/{parts[1]}"
-    return msgtype.strip()
-
-
 def _check_key(key: str) -> str:
     if not key or "/" in key:
         raise ValueError(
@@ -65,7 +59,10 @@ def _check_key(key: str) -> str:
 
 def _check_topic(topic: str) -> str:
     if not topic.startswith("/"):
-        raise ValueError(f"topic {topic!r} must be an absolute ROS topic name starting with '/'")
+        raise ValueError(
+            f"topic {topic!r} must be an absolute ROS topic name starting with '/' "
+            f"(a ROS 1 bag's relative {topic!r} is matched by '/{topic}')"
+        )
     return topic
 
 
@@ -195,7 +192,8 @@ class ScalarEntry(_Strict):
 class EpisodeEvents(_Strict):
     """An event topic whose messages split a bag into episodes (``START``, ``SUCCESS``, ``FAIL``,
     ``DISCARD``, ``RESET``): a ``std_msgs/String`` holding the event name or JSON
-    ``{"event": ..., "note": ...}``, or ``field`` (a dot path) of any message."""
+    ``{"event_type": ..., "note": ..., "stamp": ..., "episode_id": ...}`` (``event`` / ``type`` too),
+    or ``field`` (a dot path; default ``data``, else ``event_type``) of any message."""
 
     topic: Topic
     type: MsgType = "std_msgs/msg/String"
@@ -203,6 +201,9 @@ class EpisodeEvents(_Strict):
     """Dot path to the event name; default ``data``."""
     note_field: str | None = None
     """Dot path to a free-text note (JSON strings carry it as ``note``)."""
+    time: Literal["stamp", "log"] = "stamp"
+    """An event's time: its own ``stamp`` when it carries one (JSON key or message field), else the
+    bag's log time; ``log`` always uses the log time."""
 
 
 class DoneSignal(_Strict):

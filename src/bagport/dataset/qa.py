@@ -1,10 +1,11 @@
 """The dataset's QA record: ``meta/qa/`` beside (never inside) ``info.json``.
 
 ```
-meta/qa/chunk-000/file-NNN.parquet   run NNN: one row per episode and check (value, verdict, reason)
+meta/qa/chunk-000/file-NNN.parquet   run NNN: one row per episode and check (value, verdict, reason, robot_id)
 meta/qa/index/run-NNN.parquet        run NNN: one compact row per episode (bagport.qa.fleet.INDEX_SCHEMA)
 meta/qa/details/run-NNN/PPPPPP.html  a warned or failed episode's page: checks, plots, thumbnails
-meta/qa/summary.json                 per bag: episode index (null when excluded), score, verdict, reason
+meta/qa/summary.json                 per bag: episode index (null when excluded), score, verdict, reason,
+                                     metadata (manifest columns such as robot_id, the events' episode_id)
 meta/qa/report.html                  the fleet report over the whole dataset (bagport.qa.fleet)
 ```
 Excluded bags and bags that could not be converted are listed too, with the reason. Each run adds its
@@ -62,6 +63,7 @@ _QA_FIELDS: list[tuple[str, pa.DataType]] = [
     ("verdict", pa.string()),
     ("hard", pa.bool_()),
     ("reason", pa.string()),
+    ("robot_id", pa.string()),
 ]
 QA_SCHEMA = pa.schema(_QA_FIELDS)
 
@@ -102,6 +104,7 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
             "verdict",
             "hard",
             "reason",
+            "robot_id",
         )
     }
     for entry in entries:
@@ -115,6 +118,8 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
             rows["verdict"].append(check.verdict)
             rows["hard"].append(check.hard)
             rows["reason"].append(check.reason)
+            robot = entry.metadata.get("robot_id")
+            rows["robot_id"].append(None if robot is None else str(robot))
     return pa.table(rows, schema=QA_SCHEMA)
 
 

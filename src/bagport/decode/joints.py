@@ -11,6 +11,9 @@ Selector grammar (Rosetta's, extended to trajectories):
   ``value_dot.<dof>`` its rate; without a selector, every value.
 - JointTrajectory names with an index (``points[0].positions[2]``, ``positions[2]`` = first point)
   or starting with ``time_from_start`` / ``header`` are dot paths into the message.
+- JointState by position in the arrays, for drivers that publish ``name: []``: ``position[0]``,
+  ``velocity[2]``, ``effort[-1]`` (dot-path indexing, as for any array); without a selector, such a
+  message gives every position as ``position[0]``, ``position[1]``...
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from typing import Any, NamedTuple
 import numpy as np
 import numpy.typing as npt
 
-from bagport.decode.paths import Vector, VectorExtractor, resolve_path
+from bagport.decode.paths import Vector, VectorExtractor, paths_extractor, resolve_path
 from bagport.errors import DecodeError
 
 __all__ = ["joint_state_extractor", "joint_trajectory_extractor", "multi_dof_extractor"]
@@ -37,6 +40,7 @@ _POINT_FIELDS = {
 _DOF_FIELDS = {"position": "values", "value": "values", "value_dot": "values_dot"}
 _POINT_PREFIX = re.compile(r"^points\[(-?\d+)\]\.")
 _POINT_PATH = re.compile(r"^(?:(?:positions|velocities|accelerations|effort)\[-?\d+\]|time_from_start\.\w+)$")
+_STATE_INDEX = re.compile(r"^(?:position|velocity|effort)\[-?\d+\]$")
 
 
 class _JointSelector(NamedTuple):
@@ -84,7 +88,8 @@ class _ByName:
             raise DecodeError(
                 f"joint(s) {missing} not in this {self._what} message (it has {list(names)})",
                 topic=self._topic,
-                fix="fix selector.names in the contract to use joint names the robot publishes.",
+                fix="fix selector.names in the contract to use joint names the robot publishes"
+                + ("; it publishes none: select by index, e.g. 'position[0]'." if not names else "."),
             )
         self._index = {
             group: np.array([lookup[self._selectors[i].joint] for i in slots], dtype=np.intp)
@@ -111,15 +116,33 @@ class _ByName:
 
 
 def joint_state_extractor(topic: str, names: tuple[str, ...], first_msg: Any) -> VectorExtractor:
-    """By joint name; without names, every position in the first message's order."""
-    if not names:
+    """By joint name or by index (``position[2]``); without names, every position in the first message's
+    order (by index when it names no joints)."""
+    if not names and len(first_msg.name):
         names = tuple(f"position.{j}" for j in first_msg.name)
-    selectors = tuple(_parse(n, _STATE_FIELDS) for n in names)
+    elif not names:
+        names = tuple(f"position[{i}]" for i in range(len(first_msg.position)))
+    indexed = [(i, n) for i, n in enumerate(names) if _STATE_INDEX.match(n)]
+    joints = [(i, _parse(n, _STATE_FIELDS)) for i, n in enumerate(names) if not _STATE_INDEX.match(n)]
+    if not joints:
+        return paths_extractor(topic, names)
 
     def values_of(msg: Any, _point: int, field: str) -> Any:
         return getattr(msg, field)
 
-    return VectorExtractor(names, _ByName(topic, "JointState", selectors, lambda m: tuple(m.name), values_of))
+    by_name = _ByName(topic, "JointState", tuple(s for _, s in joints), lambda m: tuple(m.name), values_of)
+    if not indexed:
+        return VectorExtractor(names, by_name)
+    joint_slots = [i for i, _ in joints]
+
+    def extract(msg: Any) -> Vector:
+        out = np.empty(len(names), dtype=np.float64)
+        out[joint_slots] = by_name(msg)
+        for i, path in indexed:
+            out[i] = resolve_path(msg, path, topic)
+        return out
+
+    return VectorExtractor(names, extract)
 
 
 def _point(msg: Any, index: int, topic: str) -> Any:

@@ -73,7 +73,21 @@ def _custom_extractor(src: SourceSpec, decoder: CustomDecoder, first_msg: Any) -
 def make_extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
     """Build the extractor for ``src``; the first message fixes unnamed dimensions.
 
-    Precedence: the entry's ``decoder``, a decoder registered for the type, then the built-in ones."""
+    Precedence: the entry's ``decoder``, a decoder registered for the type, then the built-in ones.
+    A selection of no value at all (a JointState with no names and no positions) is an error."""
+    extractor = _extractor(src, first_msg)
+    if not extractor.names:
+        raise DecodeError(
+            f"{src.key!r} selects no value: the first message on {src.topic} ({src.msgtype}) has nothing "
+            "where the default selection looks (e.g. a JointState with empty name and position)",
+            topic=src.topic,
+            fix="list the values in selector.names: dot paths such as 'position[0]', 'velocity[1]' (by index, "
+            "for a JointState without joint names), or drop the entry.",
+        )
+    return extractor
+
+
+def _extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
     if src.decoder is not None:
         decoder = resolve_decoder(src.decoder, field=f"{src.key} on {src.topic}")
         return _custom_extractor(src, decoder, first_msg)

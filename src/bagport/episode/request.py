@@ -77,11 +77,13 @@ class EpisodeRequest:
         return f"{self.start_ns}:{self.end_ns}:{self.start_s}:{self.end_s}"
 
     def for_window(
-        self, segment: int, start_ns: int, end_ns: int, label: str | None, note: str
+        self, segment: int, start_ns: int, end_ns: int, label: str | None, note: str, episode_id: str = ""
     ) -> EpisodeRequest:
-        """The request for one episode of this bag."""
+        """The request for one episode of this bag; the recorder's ``episode_id`` (from its episode
+        events) joins the episode's metadata."""
         windowed = replace(
             self,
+            metadata={**self.metadata, "episode_id": episode_id} if episode_id else self.metadata,
             start_ns=start_ns,
             end_ns=end_ns,
             start_s=None,

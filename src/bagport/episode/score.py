@@ -83,7 +83,15 @@ def _entry(qa: EpisodeQA, request: EpisodeRequest, keep_failed: bool) -> QAEntry
     by_label = not keep_failed and request.label in EXCLUDED_LABELS
     reason = label_reason(request.label, request.note) if by_label else None
     return QAEntry(
-        qa, request.manifest_entry, None, reason, request.segment, request.label, request.note, by_label
+        qa,
+        request.manifest_entry,
+        None,
+        reason,
+        request.segment,
+        request.label,
+        request.note,
+        by_label,
+        dict(request.metadata),
     )
 
 
@@ -145,7 +153,7 @@ def _score(
         for request, (found, failed) in zip(requests, _map(pool, segment_for_qa, requests), strict=True):
             episodes += found
             if failed is not None:
-                entries.append(QAEntry(failed, request.manifest_entry, None))
+                entries.append(QAEntry(failed, request.manifest_entry, None, metadata=dict(request.metadata)))
     scores = _map(pool, score_bag, episodes)
     entries += [_entry(qa, r, keep_failed) for qa, r in zip(scores, episodes, strict=True)]
     entries.sort(key=lambda e: (e.manifest_entry, -1 if e.segment is None else e.segment))

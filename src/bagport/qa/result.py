@@ -139,6 +139,9 @@ class QAEntry:
     note: str = ""
     by_label: bool = False
     """Left out because of its label (failed / discarded), not by QA."""
+    metadata: dict[str, Any] = field(default_factory=dict)
+    """The episode's metadata: its manifest entry's columns (``robot_id``...) and the recorder's
+    ``episode_id`` from episode events."""
 
     @property
     def name(self) -> str:
@@ -165,4 +168,5 @@ class QAEntry:
             "label": self.label,
             "note": self.note,
             "excluded_by_label": self.by_label,
+            "metadata": self.metadata,
         }

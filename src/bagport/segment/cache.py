@@ -75,7 +75,14 @@ def read_segmentation(uri: str) -> Segmentation | None:
 
 def _to_dict(segmentation: Segmentation) -> dict[str, Any]:
     windows = [
-        {"start_ns": w.start_ns, "end_ns": w.end_ns, "label": w.label, "note": w.note, "ended_by": w.ended_by}
+        {
+            "start_ns": w.start_ns,
+            "end_ns": w.end_ns,
+            "label": w.label,
+            "note": w.note,
+            "ended_by": w.ended_by,
+            "episode_id": w.episode_id,
+        }
         for w in segmentation.windows
     ]
     return {"windows": windows, "ignored": list(segmentation.ignored)}
@@ -89,6 +96,7 @@ def _from_dict(data: dict[str, Any]) -> Segmentation:
             None if w["label"] is None else str(w["label"]),
             str(w["note"]),
             str(w["ended_by"]),
+            str(w.get("episode_id", "")),
         )
         for w in data["windows"]
     )

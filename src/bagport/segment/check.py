@@ -10,6 +10,8 @@ from bagport.contract import ContractPlan, normalize_msgtype
 from bagport.contract.model import DoneSignal, EpisodeEvents
 from bagport.decode import field_at
 from bagport.errors import ContractError, DecodeError
+from bagport.segment.events import default_event_field, event_from_message, json_keys
+from bagport.segment.windows import Event
 
 __all__ = ["check_episode_topics"]
 
@@ -28,18 +30,49 @@ def check_episode_topics(reader: BagReader, plan: ContractPlan) -> None:
         _check_topic(reader, plan, section, spec)
     first = _first_messages(reader, {spec.topic for spec in specs.values()})
     for section, spec in specs.items():
-        paths = {"field": spec.field or "data"}
+        first_msg = first[spec.topic]
+        default = default_event_field(first_msg) if isinstance(spec, EpisodeEvents) else "data"
+        paths = {"field": spec.field or default}
         if isinstance(spec, EpisodeEvents) and spec.note_field:
             paths["note_field"] = spec.note_field
         for key, path in paths.items():
             try:
-                value = field_at(first[spec.topic], path, spec.topic)
+                value = field_at(first_msg, path, spec.topic)
             except DecodeError as err:
                 raise _error(
                     plan, section, key, f"{err.what} (first message on {spec.topic})", err.fix
                 ) from err
             if isinstance(spec, DoneSignal):
                 _check_number(plan, spec, value, path)
+    if options.events is not None:
+        _check_names_events(reader, plan, options.events)
+
+
+def _check_names_events(reader: BagReader, plan: ContractPlan, spec: EpisodeEvents) -> None:
+    """At least one message of the event topic names an event (else convert would make one episode of
+    the whole bag): the error says what the messages hold instead (their JSON keys, or the text)."""
+    texts: list[str] = []
+    for message in reader.messages((spec.topic,)):
+        try:
+            found = event_from_message(message.msg(), message.log_time_ns, spec)
+        except DecodeError as err:
+            raise _error(plan, "events", "field", f"{err.what} (message on {spec.topic})", err.fix) from err
+        if isinstance(found, Event):
+            return
+        texts.append(found)
+    if not texts:
+        return
+    keys = json_keys(texts[0])
+    held = f"JSON with keys {keys}" if keys is not None else f"text such as {texts[0][:60]!r}"
+    raise _error(
+        plan,
+        "events",
+        "field" if spec.field else "topic",
+        f"none of the {len(texts)} message(s) on {spec.topic} in bag {reader.info.uri} names an event "
+        f"(START, SUCCESS, FAIL, DISCARD, RESET); they hold {held}",
+        "publish the event name as the text or under the JSON key 'event_type' (or 'event' / 'type'), "
+        "or set 'field:' under episodes.events to the field that holds it.",
+    )
 
 
 def _check_topic(

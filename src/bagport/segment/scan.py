@@ -83,6 +83,7 @@ def segment_bag(reader: BagReader, options: EpisodesOptions, stream_topics: tupl
             located = err if isinstance(err, DecodeError) else DecodeError(str(err), topic=message.topic)
             raise located.located(uri=info.uri, topic=message.topic, t_ns=t_ns) from err
     if events_spec is not None:
+        _check_events(events, unknown, info.uri, events_spec.topic, (info.start_ns, info.end_ns))
         segmentation = windows_from_events(events, info.start_ns, info.end_ns)
     else:
         segmentation = Segmentation((EpisodeWindow(info.start_ns, info.end_ns, ended_by="bag end"),))
@@ -94,6 +95,36 @@ def segment_bag(reader: BagReader, options: EpisodesOptions, stream_topics: tupl
     if done_spec is not None:
         segmentation = split_at_done(segmentation, done_edges_ns(done_ns, done_values))
     return drop_short(segmentation, options.min_duration_s, info.start_ns)
+
+
+_CLOCK_SLACK_NS = 60 * 1_000_000_000
+
+
+def _check_events(
+    events: list[Event], unknown: list[str], uri: str, topic: str, span_ns: tuple[int, int]
+) -> None:
+    """An event topic whose messages name no event, or events stamped on another clock than the bag's,
+    would silently make one episode of the whole bag: refuse them."""
+    if unknown and not events:
+        raise DecodeError(
+            f"none of the {len(unknown)} message(s) on the episode events topic names an event (first at "
+            f"{unknown[0]})",
+            uri=uri,
+            topic=topic,
+            fix="publish START/SUCCESS/FAIL/DISCARD/RESET as the text or under the JSON key 'event_type' "
+            "(or 'event' / 'type'), or point episodes.events.field at the field holding it.",
+        )
+    start_ns, end_ns = span_ns
+    for event in events:
+        if not start_ns - _CLOCK_SLACK_NS <= event.t_ns <= end_ns + _CLOCK_SLACK_NS:
+            offset_s = (event.t_ns - start_ns) / 1e9
+            raise DecodeError(
+                f"the {event.kind.value} event is stamped {offset_s:.1f} s from the bag's start, outside the "
+                "bag: its stamp is not on the bag's clock",
+                uri=uri,
+                topic=topic,
+                fix="set 'time: log' under episodes.events to use the bag's log time, or fix the stamps.",
+            )
 
 
 def segment_request(request: EpisodeRequest) -> SegmentedBag:
@@ -108,7 +139,7 @@ def segment_request(request: EpisodeRequest) -> SegmentedBag:
         return SegmentedBag((request,))
     segmentation, cached = _cached_or_scanned(request, *splitting)
     requests = tuple(
-        request.for_window(k, w.start_ns, w.end_ns, w.label, w.note)
+        request.for_window(k, w.start_ns, w.end_ns, w.label, w.note, w.episode_id)
         for k, w in enumerate(segmentation.windows)
     )
     return SegmentedBag(requests, segmentation.ignored, cached)

@@ -63,6 +63,8 @@ class Event:
     t_ns: int
     kind: EventKind
     note: str = ""
+    episode_id: str = ""
+    """The recorder's own episode id (the seed's event schema), if the event carries one."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -74,6 +76,8 @@ class EpisodeWindow:
     note: str = ""
     ended_by: str = ""
     """What ended the window: an event name, ``gap``, ``done``, ``bag end``."""
+    episode_id: str = ""
+    """The recorder's episode id from the events that opened or ended the window (empty: none)."""
 
     @property
     def duration_s(self) -> float:
@@ -101,24 +105,27 @@ def windows_from_events(events: Iterable[Event], start_ns: int, end_ns: int) -> 
     opened: int | None = None  # time of the START of the open episode
     boundary: int | None = start_ns  # start of an implicit episode; None inside a reset period
     reset_at = start_ns
+    opened_id = ""  # the episode id the START carried
 
-    def close(begin: int, end: int, label: str | None, note: str, ended_by: str) -> None:
+    def close(
+        begin: int, end: int, label: str | None, note: str, ended_by: str, episode_id: str = ""
+    ) -> None:
         begin = max(begin, windows[-1].end_ns + 1) if windows else begin  # simultaneous events
         if begin <= end:
-            windows.append(EpisodeWindow(begin, end, label, note, ended_by))
+            windows.append(EpisodeWindow(begin, end, label, note, ended_by, opened_id or episode_id))
 
     for event in ordered:
         t = event.t_ns
         if event.kind is EventKind.START:
             if opened is not None:
                 close(opened, t - 1, None, "", "START")
-            opened = t
+            opened, opened_id = t, event.episode_id
         elif event.kind is EventKind.RESET:
             if opened is not None:
                 close(opened, t - 1, None, "", "RESET")
             elif boundary is not None and boundary < t:
                 ignored.append(f"{_s(boundary, start_ns)}..{_s(t, start_ns)}: no START before the RESET")
-            opened, boundary, reset_at = None, None, t
+            opened, boundary, reset_at, opened_id = None, None, t, ""
         else:
             begin = opened if opened is not None else boundary
             if begin is None:
@@ -127,8 +134,8 @@ def windows_from_events(events: Iterable[Event], start_ns: int, end_ns: int) -> 
                     f"{_s(reset_at, start_ns)} (no START since)"
                 )
                 continue
-            close(begin, t, OUTCOME_LABELS[event.kind], event.note, event.kind.value)
-            opened, boundary = None, t + 1
+            close(begin, t, OUTCOME_LABELS[event.kind], event.note, event.kind.value, event.episode_id)
+            opened, boundary, opened_id = None, t + 1, ""
     if opened is not None:
         close(opened, end_ns, None, "", "bag end")
     elif boundary is not None and boundary < end_ns:

@@ -20,6 +20,7 @@ from rosbags.rosbag1 import ReaderError as Ros1ReaderError
 from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from rosbags.typesys import Stores, get_typestore
 
+from bagport.bags.bundled import BUNDLED_DEFINITIONS
 from bagport.bags.detect import detect_storage
 from bagport.bags.indexcount import window_counts
 from bagport.bags.layout import BagPath, plan_reads
@@ -30,11 +31,15 @@ from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
 from bagport.bags.typeload import TolerantAnyReader, is_service_event
 from bagport.bags.typesources import complete_typestore, parse_msg_definitions, undefined_type_error
 from bagport.errors import BagportError, BagReadError, TransientError
+from bagport.msgtypes import RosType
 from bagport.uris import is_local
 
 __all__ = ["BagReader", "open_bag"]
 
 _HEADER = "std_msgs/msg/Header"
+_TIME = "builtin_interfaces/msg/Time"
+_STAMP_FIRST = frozenset({RosType.COMPRESSED_VIDEO.value})
+"""Types without a Header whose first field is the capture time (foxglove's ``timestamp``)."""
 RANGED_STORAGES = frozenset({Storage.MCAP})
 """Read in place on remote stores (summary + chunk index); other formats are downloaded first."""
 _ROSBAGS_ERRORS = (AnyReaderError, Ros1ReaderError, Ros2ReaderError)
@@ -106,7 +111,10 @@ class RosbagsReader:
         self._mcap_files = plan.data_files if storage is Storage.MCAP else []
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
-            extra = parse_msg_definitions(msg_definitions or {})
+            extra = {
+                **parse_msg_definitions(BUNDLED_DEFINITIONS, "bagport's bundled types"),
+                **parse_msg_definitions(msg_definitions or {}),
+            }
             bundled = get_typestore(store)
             self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled)
             self._reader.open()
@@ -177,6 +185,8 @@ class RosbagsReader:
         if not fields or not fields[1]:
             return None
         _, (nodetype, detail) = fields[1][0]
+        if nodetype == Nodetype.NAME and detail == _TIME and msgtype in _STAMP_FIRST:
+            return HeaderLayout.ROS1_TIME if self._layout == HeaderLayout.ROS1 else HeaderLayout.CDR
         return self._layout if nodetype == Nodetype.NAME and detail == _HEADER else None
 
     def _connections(self, topics: Sequence[str] | None) -> list[Any]:

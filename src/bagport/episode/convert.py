@@ -26,6 +26,7 @@ from bagport.episode.request import EpisodeRequest
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
+from bagport.episode.video import skipped_packet_checks
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.staging import (
@@ -134,6 +135,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                     ticks,
                     sinks.on_frame,
                     plan.source_name,
+                    whole,
                 )
             finally:
                 clips = sinks.close()
@@ -144,6 +146,13 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
                 task_check(qa_config, frame_tasks),
                 *video_checks,
+                *skipped_packet_checks(
+                    {
+                        t.topic: t.skipped_packets
+                        for t in timeline.topics.values()
+                        if t.skipped_packets is not None
+                    }
+                ),
             ]
             qa = assess_episode(
                 request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,

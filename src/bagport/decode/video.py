@@ -22,7 +22,15 @@ import numpy.typing as npt
 from bagport.errors import DecodeError
 from bagport.msgtypes import RosType
 
-__all__ = ["KeyframeGate", "StreamDecoder", "VideoPacket", "frame_rgb", "is_keyframe", "video_packet"]
+__all__ = [
+    "KeyframeGate",
+    "StreamDecoder",
+    "VideoPacket",
+    "decoder_settings",
+    "frame_rgb",
+    "is_keyframe",
+    "video_packet",
+]
 
 Rgb = npt.NDArray[np.uint8]
 _H264, _HEVC = "h264", "hevc"
@@ -128,6 +136,11 @@ class StreamDecoder:
                 fix="the stream is corrupt at this message; cut the episode window around it.",
             ) from err
         return [(int(frame.pts), frame) for frame in frames if frame.pts is not None]
+
+
+def decoder_settings() -> dict[str, Any]:
+    """What decides a video stream's decoded pixels besides its bytes: the decoder library versions."""
+    return {"decoder": "pyav", "av": av.__version__, "libavcodec": av.library_versions.get("libavcodec")}
 
 
 def frame_rgb(frame: Any) -> Rgb:

@@ -13,6 +13,7 @@ import numpy.typing as npt
 import pyarrow.parquet as pq
 import pytest
 
+import bagport.episode.reuse
 from bagport.dataset import write_dataset
 from bagport.dataset.validate import validate_dataset, video_backend
 from bagport.episode import convert_episode
@@ -164,3 +165,24 @@ def test_window_starting_mid_gop_gives_the_frames_of_the_whole_bag(
 def _code(chw: Any) -> int:
     rgb = (chw.permute(1, 2, 0).numpy() * 255).round().astype(np.uint8)
     return decode_frame_index(rgb)
+
+
+def test_clip_key_covers_the_video_decoder(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    front = replace(FRONT, height=32, width=48)
+    wrist = replace(WRIST, height=32, width=48)
+    bag, staging = tmp_path / "ep", tmp_path / "staging"
+    write_episode_bag(bag, "mcap", replace(SPEC, duration_s=1.0, cameras=(front, wrist)))
+    text = _contract(front)
+    first = convert_episode(episode_request(bag, staging, text))
+    fewer = text.replace("names: [j1, j2, j3, j4, j5, j6]", "names: [j1, j2]", 1)
+    second = convert_episode(episode_request(bag, staging, fewer))  # the video clip is reused
+    assert second.reused_clips == dict.fromkeys(first.clip_keys, first.episode_id)
+    other = {"decoder": "pyav", "av": "0.0", "libavcodec": (0, 0, 0)}
+    monkeypatch.setattr(bagport.episode.reuse, "decoder_settings", lambda: other)
+    third = convert_episode(
+        episode_request(bag, staging, text.replace("[j1, j2, j3, j4, j5, j6]", "[j1]", 1))
+    )
+    assert third.reused_clips == {
+        "observation.images.wrist": first.episode_id
+    }  # another decoder: decoded again
+    assert third.clip_keys["observation.images.front"] != first.clip_keys["observation.images.front"]

@@ -29,6 +29,8 @@ class CameraSpec:
     latency_ns: int = 15_000_000
     noise: float = 0.0
     """Gaussian noise (std, in grey levels) on the colour bars, like a real sensor."""
+    depth_codec: Literal["png", "rvl"] = "png"
+    """``compressed_depth`` cameras: compressed_depth_image_transport's ``png`` or ``rvl`` format."""
     bframes: int = 0
     """Video cameras: B-frames in a row (0: decode order = capture order)."""
     gop: int = 30

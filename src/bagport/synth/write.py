@@ -83,7 +83,7 @@ def _camera_message(
     if cam.is_depth:
         depth = depth_frame(cam.height, cam.width, k)
         if cam.kind == "compressed_depth":
-            payload, fmt = compressed_depth_payload(depth, cam.encoding)
+            payload, fmt = compressed_depth_payload(depth, cam.encoding, cam.depth_codec)
             return msgs.compressed(header=header, format=fmt, data=np.frombuffer(payload, dtype=np.uint8))
         data, step = raw_depth_bytes(depth, cam.encoding)
         return msgs.image(

@@ -28,7 +28,9 @@ def _numbers(data: bytes) -> npt.NDArray[np.int64]:
     """Every variable-length coded number in ``data``, in order."""
     usable = len(data) - len(data) % 4
     words = np.frombuffer(data[:usable], dtype="<u4")
-    nibbles = ((words[:, None] >> _NIBBLE_SHIFTS[None, :]) & 0xF).ravel().astype(np.int64)
+    nibbles: npt.NDArray[np.int64] = (
+        ((words[:, None] >> _NIBBLE_SHIFTS[None, :]) & 0xF).reshape(-1).astype(np.int64)
+    )
     last = np.flatnonzero((nibbles & 0x8) == 0)  # the last nibble of each number
     if last.size == 0:
         return np.zeros(0, dtype=np.int64)

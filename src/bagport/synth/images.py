@@ -158,7 +158,8 @@ def rvl_encode(values: npt.NDArray[np.uint16]) -> bytes:
             previous = current
     nibbles += [0] * (-len(nibbles) % 8)
     packed = np.asarray(nibbles, dtype=np.uint32).reshape(-1, 8) << _NIBBLE_SHIFTS[None, :]
-    return np.bitwise_or.reduce(packed, axis=1).astype("<u4").tobytes()
+    words: npt.NDArray[np.uint32] = np.bitwise_or.reduce(packed, axis=1).astype("<u4")
+    return words.tobytes()
 
 
 def recorded_depth(depth: DepthM, encoding: str, compressed: bool) -> DepthM:

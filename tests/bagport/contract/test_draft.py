@@ -9,6 +9,7 @@ import pytest
 from bagport.bags import open_bag
 from bagport.contract import FeatureKind, parse_contract
 from bagport.contract.draft import draft_contract
+from bagport.feature_table import describe_features
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import main
 from tests.helpers import realbag
@@ -86,3 +87,7 @@ def test_draft_maps_video_streams_and_rvl_depth_to_cameras(tmp_path: Path) -> No
     assert {key: (s.topic, s.msgtype) for key, s in sources.items()} == {
         f"observation.images.{cam.name}": (cam.topic, cam.msgtype) for cam in cameras
     }
+    # `contract check`: a video packet is no picture on its own, so its size is left to the conversion
+    shapes = {row.key: row.shape for row in describe_features(plan, str(tmp_path / "ep"))}
+    assert shapes["observation.images.front"] is None and shapes["observation.images.wrist"] is None
+    assert shapes["observation.images.depth"] == (96, 128, 1)

@@ -182,6 +182,17 @@ def scan_timeline(
                 continue
             log[stream].append(message.log_time_ns)
             header[stream].append(stamp_ns)
+    for topic, gate in gates.items():
+        if gate.skipped and not log[topic]:
+            raise AlignmentError(
+                f"none of the {gate.skipped} video packets on {topic}"
+                + ("" if window_ns is None else " in the episode window or before it")
+                + " is a key frame (H.264 IDR, H.265 IDR/BLA), so no frame can be decoded",
+                uri=reader.info.uri,
+                topic=topic,
+                fix="record the camera with periodic key frames (the encoder's GOP / keyint setting), "
+                "or leave the topic out of the contract.",
+            )
     for stream, spec in filters.items():
         if stream in log and not log[stream]:
             raise AlignmentError(

@@ -17,6 +17,7 @@ import bagport.episode.reuse
 from bagport.dataset import write_dataset
 from bagport.dataset.validate import validate_dataset, video_backend
 from bagport.episode import convert_episode
+from bagport.errors import AlignmentError
 from bagport.staging import QA_FILE, EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, decode_frame_index, write_episode_bag
 from bagport.video import iter_frames
@@ -186,3 +187,12 @@ def test_clip_key_covers_the_video_decoder(tmp_path: Path, monkeypatch: pytest.M
         "observation.images.wrist": first.episode_id
     }  # another decoder: decoded again
     assert third.clip_keys["observation.images.front"] != first.clip_keys["observation.images.front"]
+
+
+def test_stream_without_a_key_frame_is_a_clear_error(tmp_path: Path) -> None:
+    front = replace(FRONT, gop=300, skip_packets=1)  # one key frame, not recorded
+    write_episode_bag(tmp_path / "ep", "mcap", replace(SPEC, duration_s=1.0, cameras=(front, WRIST)))
+    with pytest.raises(
+        AlignmentError, match=r"none of the 30 video packets on /front/video is a key frame.*Fix:"
+    ):
+        convert_episode(episode_request(tmp_path / "ep", tmp_path / "staging", _contract(front)))

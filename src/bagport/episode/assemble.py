@@ -116,11 +116,11 @@ def _decode(source: AlignedSource, message: BagMessage) -> Any:
     return source.extractor(msg)
 
 
-def _start_video(source: AlignedSource, whole: BagReader | None, uri: str, contract_name: str) -> None:
+def _start_video(source: AlignedSource, whole: BagReader, uri: str, contract_name: str) -> None:
     """A video camera's decoder, run over the packets from the key frame before the window first."""
     preroll = source.timeline.preroll_ns
     messages = None
-    if preroll is not None and whole is not None:
+    if preroll is not None:
         messages = whole.messages([source.src.topic], start_ns=preroll[0], stop_ns=preroll[1])
     try:
         source.video = VideoFeed(source.needed, source.src.resize_hw, messages)
@@ -169,8 +169,8 @@ def assemble_frames(
     for source in sources:
         source.prepare()
         by_topic.setdefault(source.src.topic, {}).setdefault(source.src.stream, []).append(source)
-        if source.src.msgtype in VIDEO_TYPES:
-            _start_video(source, whole, uri, contract_name)
+        if source.kind is FeatureKind.VIDEO and source.src.msgtype in VIDEO_TYPES:
+            _start_video(source, whole or reader, uri, contract_name)
             video_streams.add(source.src.stream)
     filters = {s.src.stream: f for s in sources if (f := s.src.stream_filter) is not None}
     arrived = {stream: 0 for streams in by_topic.values() for stream in streams}

@@ -14,7 +14,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bagport.bags import BagMessage, BagReader
-from bagport.contract import ContractPlan
+from bagport.contract import ContractPlan, FeatureKind
 from bagport.contract.plan import StreamFilter
 from bagport.decode import child_frames, find_transform, transform_stamp_ns
 from bagport.decode.video import KeyframeGate, video_packet
@@ -233,5 +233,11 @@ def scan_plan_timeline(
         plan.stream_filters(),
         [s.stream for s in plan.sources if s.stamp == "publish" and s.child_frame is None],
         window_ns,
-        [s.topic for s in plan.sources if s.msgtype in VIDEO_TYPES],
+        [
+            s.topic
+            for f in plan.features
+            if f.kind is FeatureKind.VIDEO
+            for s in f.sources
+            if s.msgtype in VIDEO_TYPES
+        ],
     )

@@ -1,7 +1,8 @@
 """Pass 1 over a bag: when did each contract topic publish, by header and by log time.
 
 Only stamps are read (header stamps through the reader's fast path, without
-deserialising payloads), so this pass is cheap next to decoding and encoding.
+deserialising payloads), so this pass is cheap next to decoding and encoding; a
+video stream's packets are deserialised to find its key frames, never decoded.
 Task prompts (small strings) are collected here too.
 """
 

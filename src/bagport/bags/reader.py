@@ -17,6 +17,7 @@ from fsspec.core import url_to_fs
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_typestore
 
+from bagport.bags.bundled import BUNDLED_DEFINITIONS
 from bagport.bags.checksums import bag_checksums
 from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag
 from bagport.bags.detect import detect_storage
@@ -34,7 +35,7 @@ from bagport.bags.typesources import (
     undefined_type_error,
 )
 from bagport.errors import BagportError, BagReadError, TransientError
-from bagport.msgtypes import global_topic, normalize_msgtype
+from bagport.msgtypes import RosType, global_topic, normalize_msgtype
 from bagport.scratch import scratch_dir
 from bagport.uris import is_local
 from bagport.yamlsource import load_plain
@@ -42,6 +43,9 @@ from bagport.yamlsource import load_plain
 __all__ = ["BagReader", "open_bag"]
 
 _HEADER = "std_msgs/msg/Header"
+_TIME = "builtin_interfaces/msg/Time"
+_STAMP_FIRST = frozenset({RosType.COMPRESSED_VIDEO.value})
+"""Types without a Header whose first field is the capture time (foxglove's ``timestamp``)."""
 RANGED_STORAGES = frozenset({Storage.MCAP})
 """Read in place on remote stores (summary + chunk index); other formats are downloaded first."""
 
@@ -113,7 +117,9 @@ class RosbagsReader:
         self._data_files = plan.data_files
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
-            extra = parse_msg_definitions(msg_definitions or {})
+            ours = parse_msg_definitions(BUNDLED_DEFINITIONS, "bagport's bundled types")
+            given = parse_msg_definitions(msg_definitions or {})
+            extra = {**ours, **given}
             bundled = get_typestore(store)
             # the type store is shared by bags with the same definitions, storage and extra types
             store_key = f"{store}:{json.dumps(sorted((msg_definitions or {}).items()))}"
@@ -123,6 +129,9 @@ class RosbagsReader:
             lacking, sources = complete_bag_types(
                 self._reader, msgtypes, extra, bundled, store.name.replace("_", " ")
             )
+            for msgtype in set(ours) - set(given):  # foxglove/ffmpeg packets: bagport ships their .msg
+                if sources.get(msgtype, "").startswith("--msg-path"):
+                    sources[msgtype] = f"bagport's bundled {msgtype} definition"
             self._deserialize = CheckedDeserializer(uri, self._reader.deserialize, sources)
         except BagportError:
             self.close()
@@ -190,6 +199,8 @@ class RosbagsReader:
         if not fields or not fields[1]:
             return None
         _, (nodetype, detail) = fields[1][0]
+        if nodetype == Nodetype.NAME and detail == _TIME and msgtype in _STAMP_FIRST:
+            return HeaderLayout.ROS1_TIME if self._layout == HeaderLayout.ROS1 else HeaderLayout.CDR
         return self._layout if nodetype == Nodetype.NAME and detail == _HEADER else None
 
     def _connections(self, topics: Sequence[str] | None) -> list[Any]:

@@ -6,7 +6,8 @@ In order of precedence for a type a bag uses:
    ``message_definitions`` table of rosbag2 SQLite bags from Iron on; ROS 1 connection
    headers), which rosbags' reader registers on open;
 2. the bundled standard types (ROS 2 Humble, or ROS 1 Noetic for ROS 1 bags);
-3. the user's ``--msg-path`` folder of ``.msg`` files (``DIR/<pkg>/msg/<Type>.msg``), for the rest.
+3. the user's ``--msg-path`` folder of ``.msg`` files (``DIR/<pkg>/msg/<Type>.msg``), for the rest;
+4. bagport's own bundle of camera video types (:mod:`bagport.bags.bundled`).
 
 rosbag2's ``metadata.yaml`` carries only a hash of each type (``type_description_hash``),
 never the definition itself; rosbags checks embedded definitions against it.

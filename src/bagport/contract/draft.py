@@ -11,7 +11,10 @@ __all__ = ["draft_contract"]
 
 _ACTION_WORDS = re.compile(r"cmd|command|target|goal|action|leader|desired|setpoint|teleop", re.IGNORECASE)
 _TASK_WORDS = re.compile(r"task|prompt|instruction|language|goal_text", re.IGNORECASE)
-_BOILERPLATE = {"image_raw", "image", "compressed", "color", "rgb", "image_rect", "image_color", "raw"}
+_BOILERPLATE = {
+    *("image_raw", "image", "compressed", "color", "rgb", "image_rect", "image_color", "raw"),
+    *("compresseddepth", "ffmpeg", "video"),
+}
 _ACTION_TYPES = {RosType.JOINT_STATE.value, "geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped"}
 _COMMAND_TYPES = {RosType.JOINT_TRAJECTORY.value, RosType.MULTI_DOF_COMMAND.value}
 """Types that only ever carry commands: an action whatever the topic is called."""

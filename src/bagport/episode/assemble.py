@@ -27,7 +27,9 @@ from bagport.decode import (
     resize_image,
 )
 from bagport.episode.timeline import TopicTimeline
+from bagport.episode.video import VideoFeed
 from bagport.errors import AlignmentError, DecodeError
+from bagport.msgtypes import VIDEO_TYPES
 
 __all__ = ["AlignedSource", "Frame", "assemble_frames"]
 
@@ -54,6 +56,8 @@ class AlignedSource:
     required: Int64Array = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     depth: bool = False
     """A camera whose messages decoded as depth maps (its zeros fill is then invalid depth)."""
+    video: VideoFeed | None = None
+    """The decoder of a camera recorded as a video stream (pass 2)."""
 
     def prepare(self) -> None:
         self.needed = np.zeros(self.timeline.count, dtype=np.bool_)
@@ -112,6 +116,38 @@ def _decode(source: AlignedSource, message: BagMessage) -> Any:
     return source.extractor(msg)
 
 
+def _start_video(source: AlignedSource, whole: BagReader, uri: str, contract_name: str) -> None:
+    """A video camera's decoder, run over the packets from the key frame before the window first."""
+    preroll = source.timeline.preroll_ns
+    messages = None
+    if preroll is not None:
+        messages = whole.messages([source.src.topic], start_ns=preroll[0], stop_ns=preroll[1])
+    try:
+        source.video = VideoFeed(source.needed, source.src.resize_hw, messages)
+    except DecodeError as err:
+        raise _at_entry(
+            err.located(uri=uri, topic=source.src.topic, t_ns=0), source.src, contract_name
+        ) from err
+
+
+def _push_video(
+    stream_sources: Sequence[AlignedSource], message: BagMessage | None, uri: str, contract_name: str
+) -> int:
+    """Feed one packet (``None``: the end of the stream) to each video source of a stream; returns
+    how far the stream has arrived (its first unresolved sample)."""
+    feeds = [(source, source.video) for source in stream_sources if source.video is not None]
+    for source, feed in feeds:
+        try:
+            frames = feed.finish() if message is None else feed.push(message)
+        except DecodeError as err:
+            t_ns = 0 if message is None else message.log_time_ns
+            located = err.located(uri=uri, topic=source.src.topic, t_ns=t_ns)
+            raise _at_entry(located, source.src, contract_name) from err
+        for sample, image in frames:
+            source.cache[sample] = image
+    return min(feed.watermark for _, feed in feeds)
+
+
 def assemble_frames(
     reader: BagReader,
     uri: str,
@@ -120,16 +156,22 @@ def assemble_frames(
     ticks_ns: Int64Array,
     on_frame: Callable[[Frame], None],
     contract_name: str = "contract",
+    whole: BagReader | None = None,
 ) -> int:
     """Stream ``reader`` and call ``on_frame`` for every tick, in order; returns frames emitted.
 
     A message that cannot be decoded raises a :class:`DecodeError` naming the bag, topic, time and
-    the contract entry (``contract_name:line``) that reads it.
+    the contract entry (``contract_name:line``) that reads it. ``whole`` is the bag ``reader`` is a
+    window of: video streams decode from the key frame before the window.
     """
     by_topic: dict[str, dict[str, list[AlignedSource]]] = {}
+    video_streams: set[str] = set()
     for source in sources:
         source.prepare()
         by_topic.setdefault(source.src.topic, {}).setdefault(source.src.stream, []).append(source)
+        if source.kind is FeatureKind.VIDEO and source.src.msgtype in VIDEO_TYPES:
+            _start_video(source, whole or reader, uri, contract_name)
+            video_streams.add(source.src.stream)
     filters = {s.src.stream: f for s in sources if (f := s.src.stream_filter) is not None}
     arrived = {stream: 0 for streams in by_topic.values() for stream in streams}
     total = int(ticks_ns.size)
@@ -150,6 +192,10 @@ def assemble_frames(
     for message in reader.messages(tuple(by_topic)):
         wanted = False
         for stream, stream_sources in by_topic[message.topic].items():
+            if stream in video_streams:
+                arrived[stream] = _push_video(stream_sources, message, uri, contract_name)
+                wanted = True
+                continue
             spec = filters.get(stream)
             if (
                 spec is not None
@@ -170,6 +216,10 @@ def assemble_frames(
             emit_ready()
         if next_tick == total:
             break
+    if next_tick < total and video_streams:  # the frames still inside the decoders
+        for stream in video_streams:
+            arrived[stream] = _push_video(_stream_sources(by_topic, stream), None, uri, contract_name)
+        emit_ready()
     if next_tick < total:
         raise AlignmentError(
             f"the bag ended after {next_tick} of {total} frames: messages seen in the first pass were missing "
@@ -178,6 +228,10 @@ def assemble_frames(
             fix="the bag changed while it was read, or it is corrupt; re-run, or reindex the bag.",
         )
     return total
+
+
+def _stream_sources(by_topic: dict[str, dict[str, list[AlignedSource]]], stream: str) -> list[AlignedSource]:
+    return next(streams[stream] for streams in by_topic.values() if stream in streams)
 
 
 def _at_entry(err: DecodeError, src: SourceSpec, contract_name: str) -> DecodeError:

@@ -26,6 +26,7 @@ from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.staged import PlannedEpisode, matches
 from bagport.episode.tasks import resolve_tasks
+from bagport.episode.video import skipped_packet_checks
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.scratch import scratch_dir
@@ -135,6 +136,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                     ticks,
                     sinks.on_frame,
                     plan.source_name,
+                    whole,
                 )
             finally:
                 clips = sinks.close()
@@ -146,6 +148,13 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
                 *integrity_check(info, qa_config),
                 task_check(qa_config, frame_tasks),
                 *video_checks,
+                *skipped_packet_checks(
+                    {
+                        t.topic: t.skipped_packets
+                        for t in timeline.topics.values()
+                        if t.skipped_packets is not None
+                    }
+                ),
             ]
             qa = assess_episode(
                 request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,

@@ -39,13 +39,19 @@ def _streams(timeline: Timeline, sources: Sequence[AlignedSource]) -> list[Strea
     for source in sources:
         topic = timeline.topics[source.src.stream]
         if topic.topic not in by_topic:
+            log_ns, header_ns, publish_ns = topic.log_ns, topic.header_ns, topic.publish_ns
+            if topic.skipped_packets is not None and header_ns is not None:
+                # a video stream's packets come in decode order: judge its stamps in capture order
+                order = np.argsort(header_ns, kind="stable")
+                log_ns, header_ns = log_ns[order], header_ns[order]
+                publish_ns = None if publish_ns is None else publish_ns[order]
             by_topic[topic.topic] = StreamStamps(
                 topic.topic,
-                topic.log_ns,
-                topic.header_ns,
+                log_ns,
+                header_ns,
                 source.stamp_used,
                 source.kind is FeatureKind.VIDEO,
-                topic.publish_ns,
+                publish_ns,
             )
     return list(by_topic.values())
 

@@ -4,7 +4,9 @@ decoded and encoded the same way, is not decoded or encoded again.
 Each staged episode records a *clip key* per camera: a digest of the bag (URI and file stamp), the
 camera's contract source (topic, type, stamp, strategy, resize, decoder, fill), which message feeds
 every frame (the per-tick selection), the frame ticks, the fps, the encoder and QA settings, the
-``--msg-path`` definitions and the bagport version. When a new contract changes something else (a
+``--msg-path`` definitions and the bagport version; for a camera recorded as video also the stream's
+decoding: the packets skipped before its first key frame, the pre-roll from the key frame before the
+window, and the decoder library versions. When a new contract changes something else (a
 state selector, an action, a task topic), the frame grid and the camera's selection stay the same, so
 the key does too, and the clip (with its image stats and its image/video QA results) is copied from
 the earlier staged episode of the same bag. Reuse needs the earlier episode in the staging store:
@@ -24,6 +26,7 @@ from fsspec.core import url_to_fs
 
 from bagport import __version__
 from bagport.contract import FeatureKind
+from bagport.decode.video import decoder_settings
 from bagport.episode.assemble import AlignedSource
 from bagport.episode.request import EpisodeRequest, msg_definitions_sha256
 from bagport.qa import CheckResult
@@ -93,6 +96,9 @@ def clip_keys(
             _digest_value(digest, getattr(source.selection, field.name))
         _digest_value(digest, source.filled)
         _digest_value(digest, ticks_ns)
+        if source.timeline.skipped_packets is not None:  # a video stream: how it was decoded
+            timeline = source.timeline
+            _digest_value(digest, (timeline.skipped_packets, timeline.preroll_ns, decoder_settings()))
         keys[source.src.key] = digest.hexdigest()
     return keys
 

@@ -92,6 +92,7 @@ PROVENANCE_SCHEMA = pa.schema(
         ("weight", pa.float64()),
         ("fill", pa.dictionary(pa.int32(), pa.string())),
         ("source_publish_ns", pa.int64()),
+        ("packet_index", pa.int64()),
     ]
 )
 
@@ -130,6 +131,8 @@ def _source_block(source: AlignedSource, frames: Int64Array, ticks_ns: Int64Arra
         weights = pa.nulls(frames.size, pa.float64())
     filled = source.filled[frames]
     size = int(frames.size)
+    skipped = source.timeline.skipped_packets  # video: the packet a sample is, in the window's stream
+    packets = pa.nulls(size, pa.int64()) if skipped is None else _array(lo + skipped, ~valid)
     return pa.Table.from_arrays(
         [
             _array(frames),
@@ -144,6 +147,7 @@ def _source_block(source: AlignedSource, frames: Int64Array, ticks_ns: Int64Arra
             weights,
             _constant(source.src.fill, size, present=filled),
             _array(publish[at], ~valid) if publish is not None else pa.nulls(size, pa.int64()),
+            packets,
         ],
         schema=PROVENANCE_SCHEMA,
     )

@@ -1,7 +1,8 @@
 """Pass 1 over a bag: when did each contract topic publish, by header and by log time.
 
 Only stamps are read (header stamps through the reader's fast path, without
-deserialising payloads), so this pass is cheap next to decoding and encoding.
+deserialising payloads), so this pass is cheap next to decoding and encoding; a
+video stream's packets are deserialised to find its key frames, never decoded.
 Task prompts (small strings) are collected here too.
 """
 
@@ -14,10 +15,13 @@ import numpy as np
 import numpy.typing as npt
 
 from bagport.bags import BagMessage, BagReader
-from bagport.contract import ContractPlan
+from bagport.contract import ContractPlan, FeatureKind
 from bagport.contract.plan import StreamFilter
 from bagport.decode import child_frames, find_transform, transform_stamp_ns
-from bagport.errors import AlignmentError, BagReadError
+from bagport.decode.video import KeyframeGate, video_packet
+from bagport.episode.video import keyframe_before
+from bagport.errors import AlignmentError, BagReadError, DecodeError
+from bagport.msgtypes import VIDEO_TYPES
 
 __all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_plan_timeline", "scan_timeline"]
 
@@ -33,6 +37,12 @@ class TopicTimeline:
     (publishers that stamp every message with one constant time)."""
     publish_ns: Int64Array | None = None
     """MCAP publish times, read only for sources with ``stamp: publish``; ``None`` otherwise."""
+    skipped_packets: int | None = None
+    """Video streams: packets before the first key frame, not samples (``None``: not a video stream).
+    Sample ``i`` is the stream's packet ``i + skipped_packets`` (counted from the window's start)."""
+    preroll_ns: tuple[int, int] | None = None
+    """Video streams in a window that starts inside a GOP: the log times ``[key frame, window start)``
+    to decode before the window (frames dropped), so that every packet in the window decodes."""
 
     @property
     def count(self) -> int:
@@ -68,9 +78,10 @@ def _publish_times(
     topics: tuple[str, ...],
     start_ns: int | None,
     stop_ns: int | None,
+    skipped: Mapping[str, int],
 ) -> dict[str, Int64Array]:
-    """MCAP publish times of ``topics`` logged in ``[start_ns, stop_ns)``, checked message by message
-    against the log times read."""
+    """MCAP publish times of ``topics`` logged in ``[start_ns, stop_ns)`` (minus a video stream's
+    ``skipped`` packets before its first key frame), checked message by message against the log times read."""
     out: dict[str, Int64Array] = {}
     for topic, (all_log_ns, all_publish_ns) in reader.publish_times_ns(topics).items():
         inside = np.ones(all_log_ns.shape, dtype=bool)
@@ -78,7 +89,8 @@ def _publish_times(
             inside &= all_log_ns >= start_ns
         if stop_ns is not None:
             inside &= all_log_ns < stop_ns
-        log_ns, publish_ns = all_log_ns[inside], all_publish_ns[inside]
+        first = skipped.get(topic, 0)
+        log_ns, publish_ns = all_log_ns[inside][first:], all_publish_ns[inside][first:]
         if not np.array_equal(log_ns, np.asarray(log[topic], dtype=np.int64)):
             raise BagReadError(
                 "the publish times read with the mcap library do not line up with the log times",
@@ -106,6 +118,26 @@ def _filtered_stamp(message: BagMessage, spec: StreamFilter, seen: dict[str, Non
     return transform_stamp_ns(transform)
 
 
+def _video_gates(
+    reader: BagReader, topics: Iterable[str], window_ns: tuple[int, int] | None
+) -> tuple[dict[str, KeyframeGate], dict[str, tuple[int, int]]]:
+    """A key-frame gate per video topic, open from the start when a key frame precedes the window."""
+    gates, prerolls = {}, {}
+    for topic in topics:
+        key_ns = None if window_ns is None else keyframe_before(reader, topic, window_ns[0])
+        gates[topic] = KeyframeGate(started=key_ns is not None)
+        if key_ns is not None and window_ns is not None:
+            prerolls[topic] = (key_ns, window_ns[0])
+    return gates, prerolls
+
+
+def _admitted(message: BagMessage, gate: KeyframeGate, uri: str) -> bool:
+    try:
+        return gate.admit(video_packet(message.msg(), message.msgtype))
+    except DecodeError as err:
+        raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
+
+
 def scan_timeline(
     reader: BagReader,
     topics: Iterable[str],
@@ -113,10 +145,12 @@ def scan_timeline(
     filters: Mapping[str, StreamFilter] | None = None,
     publish_topics: Iterable[str] = (),
     window_ns: tuple[int, int] | None = None,
+    video_topics: Iterable[str] = (),
 ) -> Timeline:
     """Stamps of every stream; ``topics`` are stream names (see ``SourceSpec.stream``): a topic, or a
     name in ``filters`` whose samples are only the messages of its topic carrying its transform.
     MCAP publish times too for ``publish_topics`` (``stamp: publish``; unfiltered streams only).
+    The samples of ``video_topics`` are their packets from a key frame on (:mod:`bagport.episode.video`).
     With ``window_ns`` (log time, inclusive) only the messages inside it, plus the task prompts
     before it (a prompt holds until the next). The reader checks the counts against the bag's index."""
     feature_topics = tuple(topics)
@@ -132,10 +166,14 @@ def scan_timeline(
     start_ns, stop_ns = (None, None) if window_ns is None else (window_ns[0], window_ns[1] + 1)
     if start_ns is not None and task_set:
         tasks += [_task_message(m) for m in reader.messages(tuple(sorted(task_set)), stop_ns=start_ns)]
+    gates, prerolls = _video_gates(reader, dict.fromkeys(video_topics), window_ns)
     wanted = tuple(dict.fromkeys((*by_topic, *task_set)))
     for message in reader.messages(wanted, start_ns=start_ns, stop_ns=stop_ns):
         if message.topic in task_set:
             tasks.append(_task_message(message))
+        gate = gates.get(message.topic)
+        if gate is not None and not _admitted(message, gate, reader.info.uri):
+            continue
         for stream in by_topic.get(message.topic, ()):
             spec = filters.get(stream)
             stamp_ns = (
@@ -145,6 +183,17 @@ def scan_timeline(
                 continue
             log[stream].append(message.log_time_ns)
             header[stream].append(stamp_ns)
+    for topic, gate in gates.items():
+        if gate.skipped and not log[topic]:
+            raise AlignmentError(
+                f"none of the {gate.skipped} video packets on {topic}"
+                + ("" if window_ns is None else " in the episode window or before it")
+                + " is a key frame (H.264 IDR, H.265 IDR/BLA), so no frame can be decoded",
+                uri=reader.info.uri,
+                topic=topic,
+                fix="record the camera with periodic key frames (the encoder's GOP / keyint setting), "
+                "or leave the topic out of the contract.",
+            )
     for stream, spec in filters.items():
         if stream in log and not log[stream]:
             raise AlignmentError(
@@ -155,7 +204,8 @@ def scan_timeline(
                 topic=spec.topic,
                 fix="set selector.child_frame (and parent_frame) to a frame the bag publishes.",
             )
-    publish = _publish_times(reader, log, tuple(dict.fromkeys(publish_topics)), start_ns, stop_ns)
+    skipped = {topic: gate.skipped for topic, gate in gates.items()}
+    publish = _publish_times(reader, log, tuple(dict.fromkeys(publish_topics)), start_ns, stop_ns, skipped)
     result: dict[str, TopicTimeline] = {}
     for topic in feature_topics:
         stamps = header[topic]
@@ -167,6 +217,8 @@ def scan_timeline(
             log_ns=np.asarray(log[topic], dtype=np.int64),
             header_ns=np.asarray(stamps, dtype=np.int64) if usable else None,
             publish_ns=publish.get(topic),
+            skipped_packets=gates[topic].skipped if topic in gates else None,
+            preroll_ns=prerolls.get(topic),
         )
     return Timeline(topics=result, tasks=tuple(tasks))
 
@@ -182,4 +234,11 @@ def scan_plan_timeline(
         plan.stream_filters(),
         [s.stream for s in plan.sources if s.stamp == "publish" and s.child_frame is None],
         window_ns,
+        [
+            s.topic
+            for f in plan.features
+            if f.kind is FeatureKind.VIDEO
+            for s in f.sources
+            if s.msgtype in VIDEO_TYPES
+        ],
     )

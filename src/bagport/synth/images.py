@@ -3,8 +3,8 @@
 Colour cameras start from :func:`~bagport.synth.pixels.render_frame` and are packed as the
 encoding says (BGR byte order, grey, 16-bit grey, Bayer mosaics). Depth cameras start from
 :func:`depth_frame`, an analytic depth map in metres with a hole of invalid pixels, and are
-packed as ``16UC1`` millimetres, ``32FC1`` metres, or ``compressedDepth`` (12-byte header + PNG,
-as compressed_depth_image_transport writes it). :func:`recorded_depth` is what a ROS subscriber
+packed as ``16UC1`` millimetres, ``32FC1`` metres, or ``compressedDepth`` (12-byte header + PNG or
+RVL, as compressed_depth_image_transport writes it). :func:`recorded_depth` is what a ROS subscriber
 decodes from each of those (millimetre rounding, inverse-depth quantisation).
 """
 
@@ -25,6 +25,7 @@ __all__ = [
     "raw_depth_bytes",
     "raw_image_bytes",
     "recorded_depth",
+    "rvl_encode",
 ]
 
 Rgb = npt.NDArray[np.uint8]
@@ -108,16 +109,57 @@ def raw_depth_bytes(depth: DepthM, encoding: str) -> tuple[npt.NDArray[np.uint8]
     return packed.view(np.uint8).ravel(), packed.shape[1] * packed.itemsize
 
 
-def compressed_depth_payload(depth: DepthM, encoding: str) -> tuple[bytes, str]:
-    """``CompressedImage`` ``data`` and ``format`` as compressed_depth_image_transport (PNG) writes them."""
+def compressed_depth_payload(depth: DepthM, encoding: str, codec: str = "png") -> tuple[bytes, str]:
+    """``CompressedImage`` ``data`` and ``format`` as compressed_depth_image_transport writes them
+    (``codec`` ``png``, or ``rvl``: ``uint32 width, height`` then the RVL-coded values)."""
     if encoding.lower() == "16uc1":
         stored, quant_a, quant_b = _mm(depth), 0.0, 0.0
     else:
         stored, quant_a, quant_b = _inverse_depth(depth)
+    header = struct.pack("<iff", 0, quant_a, quant_b)
+    if codec == "rvl":
+        size = struct.pack("<II", stored.shape[1], stored.shape[0])
+        return header + size + rvl_encode(stored), f"{encoding}; compressedDepth rvl"
     buf = io.BytesIO()
     PILImage.fromarray(stored).save(buf, format="PNG")
-    header = struct.pack("<iff", 0, quant_a, quant_b)
     return header + buf.getvalue(), f"{encoding}; compressedDepth png"
+
+
+_NIBBLE_SHIFTS = np.arange(28, -1, -4, dtype=np.uint32)
+
+
+def _vle(value: int, nibbles: list[int]) -> None:
+    while True:
+        nibble = value & 0x7
+        value >>= 3
+        nibbles.append(nibble | (0x8 if value else 0))
+        if not value:
+            return
+
+
+def rvl_encode(values: npt.NDArray[np.uint16]) -> bytes:
+    """RVL coding of 16-bit ``values`` (row-major), as compressed_depth_image_transport's rvl_codec.cpp
+    writes it (see :mod:`bagport.decode.rvl` for the format)."""
+    flat = np.asarray(values, dtype=np.uint16).ravel().astype(np.int64)
+    nibbles: list[int] = []
+    previous, index, size = 0, 0, flat.size
+    while index < size:
+        start = index
+        while index < size and flat[index] == 0:
+            index += 1
+        _vle(index - start, nibbles)
+        start = index
+        while index < size and flat[index] != 0:
+            index += 1
+        _vle(index - start, nibbles)
+        for current in flat[start:index].tolist():
+            delta = current - previous  # int arithmetic on unsigned shorts, as rvl_codec.cpp does
+            _vle((delta << 1) ^ (delta >> 31), nibbles)
+            previous = current
+    nibbles += [0] * (-len(nibbles) % 8)
+    packed = np.asarray(nibbles, dtype=np.uint32).reshape(-1, 8) << _NIBBLE_SHIFTS[None, :]
+    words: npt.NDArray[np.uint32] = np.bitwise_or.reduce(packed, axis=1).astype("<u4")
+    return words.tobytes()
 
 
 def recorded_depth(depth: DepthM, encoding: str, compressed: bool) -> DepthM:

@@ -7,9 +7,12 @@ from typing import Literal
 
 from bagport.synth.faults import Faults, Window
 
-__all__ = ["CameraSpec", "EpisodeSpec"]
+__all__ = ["VIDEO_KINDS", "CameraSpec", "EpisodeSpec"]
 
-CameraKind = Literal["raw", "jpeg", "png", "compressed_depth"]
+CameraKind = Literal["raw", "jpeg", "png", "compressed_depth", "video", "ffmpeg"]
+VIDEO_KINDS = ("video", "ffmpeg")
+"""H.264 streams: ``video`` as foxglove_msgs/CompressedVideo, ``ffmpeg`` as ffmpeg_image_transport's
+FFMPEGPacket (see :mod:`bagport.synth.video`)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -26,6 +29,18 @@ class CameraSpec:
     latency_ns: int = 15_000_000
     noise: float = 0.0
     """Gaussian noise (std, in grey levels) on the colour bars, like a real sensor."""
+    depth_codec: Literal["png", "rvl"] = "png"
+    """``compressed_depth`` cameras: compressed_depth_image_transport's ``png`` or ``rvl`` format."""
+    bframes: int = 0
+    """Video cameras: B-frames in a row (0: decode order = capture order)."""
+    gop: int = 30
+    """Video cameras: a key frame every ``gop`` frames."""
+    skip_packets: int = 0
+    """Video cameras: the bag lacks the stream's first packets (the recording started mid-GOP)."""
+
+    @property
+    def is_video(self) -> bool:
+        return self.kind in VIDEO_KINDS
 
     @property
     def is_depth(self) -> bool:
@@ -33,11 +48,19 @@ class CameraSpec:
 
     @property
     def topic(self) -> str:
-        suffix = {"raw": "", "compressed_depth": "/compressedDepth"}.get(self.kind, "/compressed")
+        if self.kind == "video":
+            return f"/{self.name}/video"
+        suffix = {"raw": "", "compressed_depth": "/compressedDepth", "ffmpeg": "/ffmpeg"}.get(
+            self.kind, "/compressed"
+        )
         return f"/{self.name}/image_raw{suffix}"
 
     @property
     def msgtype(self) -> str:
+        if self.kind == "video":
+            return "foxglove_msgs/msg/CompressedVideo"
+        if self.kind == "ffmpeg":
+            return "ffmpeg_image_transport_msgs/msg/FFMPEGPacket"
         return "sensor_msgs/msg/Image" if self.kind == "raw" else "sensor_msgs/msg/CompressedImage"
 
 

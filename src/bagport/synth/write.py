@@ -18,12 +18,15 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Ros2Writer
 from rosbags.typesys import Stores, get_typestore
 
+from bagport.bags.bundled import BUNDLED_DEFINITIONS
+from bagport.bags.typesources import parse_msg_definitions
 from bagport.errors import BagportError
 from bagport.synth.images import compressed_depth_payload, depth_frame, raw_depth_bytes, raw_image_bytes
 from bagport.synth.pixels import render_frame
 from bagport.synth.publish import rewrite_publish_times
 from bagport.synth.spec import CameraSpec, EpisodeSpec
 from bagport.synth.truth import GroundTruth
+from bagport.synth.video import VideoPacket, encode_video
 
 __all__ = ["SynthStorage", "write_episode_bag", "write_sample_fleet"]
 
@@ -37,6 +40,7 @@ class _Messages:
 
     def __init__(self, ros1: bool) -> None:
         self.store = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+        self.store.register(parse_msg_definitions(BUNDLED_DEFINITIONS))
         self.ros1 = ros1
         self.serialize: Callable[[Any, str], bytes | memoryview] = (
             self.store.serialize_ros1 if ros1 else self.store.serialize_cdr
@@ -49,6 +53,8 @@ class _Messages:
         self.compressed = types["sensor_msgs/msg/CompressedImage"]
         self.string = types["std_msgs/msg/String"]
         self.bool = types["std_msgs/msg/Bool"]
+        self.video = types["foxglove_msgs/msg/CompressedVideo"]
+        self.ffmpeg = types["ffmpeg_image_transport_msgs/msg/FFMPEGPacket"]
 
     def header(self, stamp_ns: int, seq: int, frame_id: str) -> Any:
         stamp = self._time(sec=stamp_ns // NS, nanosec=stamp_ns % NS)
@@ -77,7 +83,7 @@ def _camera_message(
     if cam.is_depth:
         depth = depth_frame(cam.height, cam.width, k)
         if cam.kind == "compressed_depth":
-            payload, fmt = compressed_depth_payload(depth, cam.encoding)
+            payload, fmt = compressed_depth_payload(depth, cam.encoding, cam.depth_codec)
             return msgs.compressed(header=header, format=fmt, data=np.frombuffer(payload, dtype=np.uint8))
         data, step = raw_depth_bytes(depth, cam.encoding)
         return msgs.image(
@@ -109,6 +115,51 @@ def _camera_message(
         PILImage.fromarray(rgb).save(buf, format="PNG")
         payload, fmt = buf.getvalue(), "png"
     return msgs.compressed(header=header, format=fmt, data=np.frombuffer(payload, dtype=np.uint8))
+
+
+def _video_packets(spec: EpisodeSpec, truth: GroundTruth) -> dict[str, list[VideoPacket]]:
+    """Every packet of each video camera, in decode order (frames rendered from capture indices)."""
+    out = {}
+    for index, cam in enumerate(spec.cameras):
+        if cam.is_video:
+            rng = np.random.default_rng(spec.seed + 100 + index)
+            count = truth.camera_stamps_ns(cam.name).size
+            frames = (render_frame(cam.height, cam.width, k, rng, cam.noise) for k in range(count))
+            out[cam.topic] = list(
+                encode_video(
+                    frames,
+                    width=cam.width,
+                    height=cam.height,
+                    fps=cam.rate_hz,
+                    bframes=cam.bframes,
+                    gop=cam.gop,
+                )
+            )
+    return out
+
+
+def _video_message(msgs: _Messages, cam: CameraSpec, packet: VideoPacket, k: int, stamp_ns: int) -> Any:
+    data = np.frombuffer(packet.data, dtype=np.uint8)
+    if cam.kind == "video":
+        stamp = msgs.header(stamp_ns, 0, cam.name).stamp
+        return msgs.video(timestamp=stamp, frame_id=cam.name, data=data, format="h264")
+    return msgs.ffmpeg(
+        header=msgs.header(stamp_ns, k, cam.name), width=cam.width, height=cam.height, encoding="libx264",
+        pts=packet.pts, flags=int(packet.keyframe), is_bigendian=False, data=data,
+    )  # fmt: skip
+
+
+def _video_events(
+    cam: CameraSpec, stamps: npt.NDArray[np.int64], packets: list[VideoPacket]
+) -> list[tuple[int, str, int, int]]:
+    """Packet ``j`` leaves the encoder when frame ``j + bframes`` is captured; it is stamped with the
+    capture time of the frame it carries."""
+    last = stamps.size - 1
+    return [
+        (int(stamps[min(j + cam.bframes, last)]) + cam.latency_ns, cam.topic, j, int(stamps[packet.pts]))
+        for j, packet in enumerate(packets)
+        if j >= cam.skip_packets
+    ]
 
 
 def _joint_position(truth: GroundTruth, stamp_ns: int) -> npt.NDArray[np.float64]:
@@ -153,8 +204,9 @@ def _action_message(msgs: _Messages, truth: GroundTruth, k: int, stamp_ns: int) 
     )
 
 
-def _events(truth: GroundTruth) -> Iterator[tuple[int, str, int, int]]:
-    """(log_ns, topic, index, stamp_ns) for every message, in log-time order."""
+def _events(truth: GroundTruth, video: dict[str, list[VideoPacket]]) -> Iterator[tuple[int, str, int, int]]:
+    """(log_ns, topic, index, stamp_ns) for every message, in log-time order (video cameras: the
+    index of the packet in decode order)."""
     spec = truth.spec
     events: list[tuple[int, str, int, int]] = []
 
@@ -169,6 +221,9 @@ def _events(truth: GroundTruth) -> Iterator[tuple[int, str, int, int]]:
             events.append((stamp + spec.action_latency_ns, spec.ACTION_TOPIC, k, stamp))
     dropout = spec.faults.camera_dropout
     for cam in spec.cameras:
+        if cam.is_video:  # a whole stream: no dropout or pause cuts it
+            events += _video_events(cam, truth.camera_stamps_ns(cam.name), video[cam.topic])
+            continue
         for k, stamp in enumerate(truth.camera_stamps_ns(cam.name).tolist()):
             if dropout is not None and dropout.camera == cam.name and dropout.contains(stamp, spec.start_ns):
                 continue
@@ -213,6 +268,7 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
         types[spec.DONE_TOPIC] = "std_msgs/msg/Bool"
     joint_header_ns = spec.faults.joint_header_ns(truth.joint_stamps_ns())
     rng = np.random.default_rng(spec.seed + 1)
+    video = _video_packets(spec, truth)
     writer: Any
     if storage == "ros1":
         writer = Ros1Writer(path)
@@ -227,7 +283,7 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
         }
         if storage != "ros1" and spec.task is not None:
             writer.set_custom_data(OPERATOR_PROMPT_KEY, spec.task)
-        for log_ns, topic, k, stamp in _events(truth):
+        for log_ns, topic, k, stamp in _events(truth, video):
             if topic == spec.JOINT_TOPIC:
                 msg = _joint_message(msgs, truth, k, stamp, int(joint_header_ns[k]))
             elif topic == spec.ACTION_TOPIC:
@@ -241,6 +297,8 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
             elif topic == spec.faults.ESTOP_TOPIC:
                 estop_s = spec.faults.estop_at_s or 0.0
                 msg = msgs.bool(data=estop_s <= (stamp - spec.start_ns) / NS < estop_s + 0.5)
+            elif topic in video:
+                msg = _video_message(msgs, cameras[topic], video[topic][k], k, stamp)
             else:
                 msg = _camera_message(msgs, spec, cameras[topic], k, stamp, rng)
             writer.write(conns[topic], log_ns, msgs.serialize(msg, types[topic]))
@@ -250,7 +308,9 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
         lag_ns = spec.publish_lag_ns
         for file in sorted(path.glob("*.mcap")):
             times = (
-                () if lag_ns is None else ((t, log, stamp + lag_ns) for log, t, _, stamp in _events(truth))
+                ()
+                if lag_ns is None
+                else ((t, log, stamp + lag_ns) for log, t, _, stamp in _events(truth, video))
             )
             rewrite_publish_times(file, times, crcs=spec.mcap_crcs)
     return truth

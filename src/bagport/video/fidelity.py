@@ -60,7 +60,13 @@ import numpy.typing as npt
 
 from bagport.errors import VideoError
 from bagport.video.blockmeans import BlockGrid
-from bagport.video.fidelity_compare import FidelityParams, FramePair, compare_frames, sampled_slot
+from bagport.video.fidelity_compare import (
+    FidelityParams,
+    FramePair,
+    ReferenceFile,
+    compare_frames,
+    sampled_slot,
+)
 
 __all__ = ["ClipFidelity", "FidelityParams", "FidelityRecorder", "FramePair", "compare_clip"]
 
@@ -168,12 +174,10 @@ class FidelityRecorder:
             self._file.close()
             self._file = None
 
-    def references(self) -> npt.NDArray[np.float16]:
-        """All sampled references, ``sampled_frames x rows x cols x 3``, memory-mapped read-only."""
+    def references(self) -> ReferenceFile:
+        """The sampled references (``rows x cols x 3`` each), read from the file one at a time."""
         self.close()
-        if not self.sampled_frames:
-            return np.zeros((0, *self.ref_shape), _REF_DTYPE)
-        return np.memmap(self.path, dtype=_REF_DTYPE, mode="r", shape=(self.sampled_frames, *self.ref_shape))
+        return ReferenceFile(self.path, _REF_DTYPE, self.ref_shape, self.sampled_frames)
 
     def discard(self) -> None:
         """Close and delete the reference file."""

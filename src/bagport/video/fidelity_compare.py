@@ -6,6 +6,7 @@ import math
 from collections import deque
 from dataclasses import dataclass, field
 from fractions import Fraction
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -16,9 +17,35 @@ import numpy.typing as npt
 from bagport.errors import VideoError
 from bagport.video.blockmeans import BlockGrid
 
-__all__ = ["FidelityParams", "FramePair", "FrameScores", "compare_frames", "sampled_slot"]
+__all__ = ["FidelityParams", "FramePair", "FrameScores", "ReferenceFile", "compare_frames", "sampled_slot"]
 
 _RED = np.array([255, 0, 0], np.uint8)
+
+
+class ReferenceFile:
+    """The block-mean references of a clip, read one sample at a time from their file.
+
+    Read, not memory-mapped: the pages of a mapping count towards the process's memory and stay
+    while it is open, so a long episode's comparison would grow with its length.
+    """
+
+    def __init__(self, path: Path, dtype: npt.DTypeLike, shape: tuple[int, ...], count: int) -> None:
+        self._path = path
+        self._dtype = np.dtype(dtype)
+        self._shape = shape
+        self._bytes = int(np.prod(shape)) * self._dtype.itemsize
+        self._count = count
+
+    def __len__(self) -> int:
+        return self._count
+
+    def __getitem__(self, slot: int) -> npt.NDArray[Any]:
+        if not 0 <= slot < self._count:
+            raise IndexError(slot)
+        with self._path.open("rb") as handle:
+            handle.seek(slot * self._bytes)
+            data = handle.read(self._bytes)
+        return np.frombuffer(data, dtype=self._dtype).reshape(self._shape)
 
 
 @dataclass(frozen=True, slots=True)
@@ -131,7 +158,7 @@ def sampled_slot(n: int, sample_every: int, run: int) -> int | None:
 
 def compare_frames(
     mp4_path: str | Path,
-    refs: npt.NDArray[np.float16],
+    refs: ReferenceFile,
     grid: BlockGrid,
     sampling: tuple[int, int],
     fps: int | None,
@@ -162,7 +189,7 @@ def compare_frames(
         unfed: list[Any] = []
         live = False  # the decoder has this GOP's key frame
         packets = (p for p in container.demux(stream) if p.pts is not None and p.size)
-        for packet in [*packets, None]:
+        for packet in chain(packets, [None]):  # lazily: a list of every packet grows with the clip
             if packet is not None:
                 if packet.is_keyframe:
                     unfed, live = [], False

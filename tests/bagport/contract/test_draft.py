@@ -9,7 +9,8 @@ import pytest
 from bagport.bags import open_bag
 from bagport.contract import FeatureKind, parse_contract
 from bagport.contract.draft import draft_contract
-from bagport.synth import EpisodeSpec, write_episode_bag
+from bagport.feature_table import describe_features
+from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import main
 from tests.helpers import realbag
 
@@ -70,3 +71,23 @@ def test_draft_maps_trajectory_commands_and_explains_tf(tmp_path: Path) -> None:
     assert "      topic: /arm_controller/joint_trajectory" in text
     assert "#   /tf (tf2_msgs/msg/TFMessage): map one transform with selector: {child_frame: <frame>}" in text
     assert [f.key for f in parse_contract(text, "draft.yaml").features] == ["action"]
+
+
+def test_draft_maps_video_streams_and_rvl_depth_to_cameras(tmp_path: Path) -> None:
+    cameras = (
+        CameraSpec("front", "video", bframes=2),
+        CameraSpec("wrist", "ffmpeg"),
+        CameraSpec("depth", "compressed_depth", "16UC1", depth_codec="rvl"),
+    )
+    write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=0.5, cameras=cameras))
+    with open_bag(str(tmp_path / "ep")) as reader:
+        text = draft_contract(reader.info)
+    plan = parse_contract(text, "draft.yaml")
+    sources = {f.key: f.sources[0] for f in plan.features if f.kind is FeatureKind.VIDEO}
+    assert {key: (s.topic, s.msgtype) for key, s in sources.items()} == {
+        f"observation.images.{cam.name}": (cam.topic, cam.msgtype) for cam in cameras
+    }
+    # `contract check`: a video packet is no picture on its own, so its size is left to the conversion
+    shapes = {row.key: row.shape for row in describe_features(plan, str(tmp_path / "ep"))}
+    assert shapes["observation.images.front"] is None and shapes["observation.images.wrist"] is None
+    assert shapes["observation.images.depth"] == (96, 128, 1)

@@ -14,8 +14,16 @@ from rosbags.typesys import Stores, get_typestore
 
 from bagport.decode import decode_image, resize_image, resize_rgb
 from bagport.decode.bayer import BAYER_PATTERNS, demosaic
+from bagport.decode.rvl import rvl_decode
 from bagport.errors import DecodeError
-from bagport.synth.images import compressed_depth_payload, mosaic, raw_image_bytes, recorded_depth
+from bagport.synth.images import (
+    compressed_depth_payload,
+    depth_frame,
+    mosaic,
+    raw_image_bytes,
+    recorded_depth,
+    rvl_encode,
+)
 
 TS = get_typestore(Stores.ROS2_HUMBLE)
 Header = TS.types["std_msgs/msg/Header"]
@@ -164,6 +172,33 @@ def test_compressed_depth_16uc1_round_trips_exactly() -> None:
     assert np.isnan(out[0, 0]) and out[1, 2] == np.float32(40.0)
 
 
+@pytest.mark.parametrize("encoding", ["16UC1", "32FC1"])
+def test_compressed_depth_rvl_decodes_like_png(encoding: str) -> None:
+    depth = depth_frame(48, 64, 7)
+    rvl, rvl_fmt = compressed_depth_payload(depth, encoding, "rvl")
+    png, png_fmt = compressed_depth_payload(depth, encoding)
+    assert rvl_fmt == f"{encoding}; compressedDepth rvl"
+    from_rvl = decode_image(_compressed(rvl_fmt, rvl), COMPRESSED)
+    np.testing.assert_array_equal(from_rvl, decode_image(_compressed(png_fmt, png), COMPRESSED))
+    np.testing.assert_array_equal(from_rvl, recorded_depth(depth, encoding, compressed=True))
+
+
+def test_rvl_round_trips_a_known_16_bit_image_exactly() -> None:
+    rng = np.random.default_rng(4)
+    known = rng.integers(0, 65536, (60, 80)).astype(np.uint16)
+    known[rng.random(known.shape) < 0.3] = 0  # holes: runs of zeros
+    known[:5] = 0
+    known[-1, -7:] = 0  # ends on a zero run
+    known[10, :] = [0, 65535, 1, 40000, *([3] * 76)]  # largest jumps both ways
+    coded = rvl_encode(known)
+    assert len(coded) % 4 == 0
+    np.testing.assert_array_equal(rvl_decode(coded, known.size).reshape(known.shape), known)
+    # the format's own packing, worked by hand: 2 zeros, 1 non-zero, delta 3 -> zig-zag 6; nibbles
+    # 2,1,6 in the top of one little-endian word
+    assert rvl_encode(np.array([0, 0, 3], np.uint16)) == bytes.fromhex("00006021")
+    np.testing.assert_array_equal(rvl_decode(bytes.fromhex("00006021"), 3), [0, 0, 3])
+
+
 def test_compressed_depth_32fc1_inverts_the_inverse_depth_quantisation() -> None:
     depth = np.linspace(0.2, 9.9, 64, dtype=np.float32).reshape(8, 8)
     depth[0, 0] = np.nan
@@ -180,8 +215,13 @@ def test_compressed_depth_32fc1_inverts_the_inverse_depth_quantisation() -> None
 
 def test_compressed_depth_errors_say_what_is_wrong() -> None:
     payload, _ = compressed_depth_payload(np.ones((2, 2), np.float32), "16UC1")
-    with pytest.raises(DecodeError, match="RVL"):
+    with pytest.raises(DecodeError, match="RVL image claims"):  # a PNG payload under an rvl format
         decode_image(_compressed("16UC1; compressedDepth rvl", payload), COMPRESSED)
+    rvl, fmt = compressed_depth_payload(np.ones((2, 2), np.float32), "16UC1", "rvl")
+    with pytest.raises(DecodeError, match="RVL data ends after 0 of 4 pixels"):
+        decode_image(_compressed(fmt, rvl[:20]), COMPRESSED)
+    with pytest.raises(DecodeError, match="too short for its header"):
+        decode_image(_compressed(fmt, rvl[:15]), COMPRESSED)
     with pytest.raises(DecodeError, match="12-byte header followed by a PNG"):
         decode_image(_compressed("16UC1; compressedDepth", payload[4:]), COMPRESSED)
     with pytest.raises(DecodeError, match="expected 16UC1 or 32FC1"):

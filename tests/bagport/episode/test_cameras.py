@@ -36,6 +36,8 @@ LOSSLESS_ISH = {"codec": "libx264", "pix_fmt": "yuv444p", "crf": 0, "preset": "u
 COLOUR = ["rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC1", "8UC3", "mono16"]
 BAYER = ["bayer_rggb8", "bayer_bggr8", "bayer_gbrg8", "bayer_grbg8"]
 DEPTH = [("raw", "16UC1"), ("raw", "32FC1"), ("compressed_depth", "16UC1"), ("compressed_depth", "32FC1")]
+RVL = "cdepth_rvl_16uc1"
+"""A compressedDepth camera in compressed_depth_image_transport's RVL format."""
 NEAR_RANGE_M = (0.2, 7.0)
 """``image.depth_range_m`` of the raw 16UC1 camera (the others keep LeRobot's 0.01-10 m)."""
 
@@ -48,6 +50,7 @@ def _cameras() -> tuple[CameraSpec, ...]:
     cams = [CameraSpec(_name(e), "raw", e, height=H, width=W) for e in COLOUR + BAYER]
     cams += [CameraSpec(_name(k), k, height=H, width=W) for k in ("jpeg", "png")]
     cams += [CameraSpec(_name(e, k), k, e, height=H, width=W) for k, e in DEPTH]  # type: ignore[arg-type]
+    cams.append(CameraSpec(RVL, "compressed_depth", "16UC1", height=H, width=W, depth_codec="rvl"))
     return tuple(cams)
 
 
@@ -120,7 +123,8 @@ def test_every_encoding_loads_in_lerobot_with_its_true_values(
 
     out, summary, truth = converted
     dataset = LeRobotDataset("test/cameras", root=out, video_backend=video_backend(), depth_output_unit="m")
-    assert sorted(dataset.meta.depth_keys) == sorted(f"observation.images.{_name(e, k)}" for k, e in DEPTH)
+    depth_names = [_name(e, k) for k, e in DEPTH] + [RVL]
+    assert sorted(dataset.meta.depth_keys) == sorted(f"observation.images.{name}" for name in depth_names)
     worst_colour, worst_depth_codes = 0, 0.0
     for k in range(len(dataset)):
         item = dataset[k]
@@ -189,7 +193,7 @@ def test_depth_features_are_marked_and_their_stats_are_metres(
         c for c in qa.checks if c.check.startswith("video.") and c.subject in in_m.meta.depth_keys
     ]
     assert sorted({c.check for c in depth_checks}) == ["video.damaged_frames", "video.frame_mismatch"]
-    assert len(depth_checks) == 2 * len(DEPTH) and all(c.verdict == "pass" for c in depth_checks), (
+    assert len(depth_checks) == 2 * (len(DEPTH) + 1) and all(c.verdict == "pass" for c in depth_checks), (
         depth_checks
     )
     assert qa.plots["fidelity"][key]["sampled_frames"] == summary.frames  # every depth frame checked

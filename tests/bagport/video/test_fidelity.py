@@ -200,8 +200,10 @@ def test_recorder_keeps_references_on_disk_not_in_memory(tmp_path: Path) -> None
     recorder.close()
     assert recorder.path.stat().st_size == 301 * recorder.ref_bytes_per_sample
     refs = recorder.references()
-    assert isinstance(refs, np.memmap) and refs.shape == (301, 30, 40, 3)
+    assert len(refs) == 301 and refs[300].shape == (30, 40, 3)  # read from the file, one at a time
     np.testing.assert_allclose(refs[1], BlockGrid(height=h, width=w, block=8).means(frames[1]), atol=0.07)
+    with pytest.raises(IndexError):
+        refs[301]
     recorder.discard()
     assert not recorder.path.exists()
 

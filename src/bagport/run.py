@@ -21,7 +21,7 @@ from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
-from bagport.dataset.history import converted_bags
+from bagport.dataset.history import converted_bags, dataset_report, record_exclusions
 from bagport.dataset.write import recover_interrupted_append, recover_publish
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
@@ -218,7 +218,8 @@ def select_episodes(
             row = QAEntry(qa, entry, len(kept))
             kept.append(summary)
         entries.append(replace(row, segment=episode.segment, label=episode.label, note=episode.note))
-    if not kept:
+    if not kept and not _appends_to_existing(plan):
+        # (an append still records the exclusions, so an unchanged bad bag is not retried by every run)
         reasons = "\n".join(
             f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries
         )
@@ -228,6 +229,11 @@ def select_episodes(
             "failing episodes (--keep-failed keeps episodes labelled failed or discarded)."
         )
     return kept, entries
+
+
+def _appends_to_existing(plan: RunPlan) -> bool:
+    fs, out_path = url_to_fs(plan.config.output)
+    return plan.config.append and bool(fs.exists(out_path))
 
 
 def reduce_run(
@@ -253,6 +259,10 @@ def reduce_run(
     record["excluded"] = [
         {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
     ]
+    if not kept:  # an append whose new bags were all excluded: recorded, nothing written
+        record_exclusions(plan.config.output, record)
+        excluded = tuple(e.brief() for e in entries)
+        return replace(dataset_report(plan.config.output), excluded=excluded, qa=excluded)
     report = write_dataset(
         kept,
         plan.config.output,

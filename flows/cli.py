@@ -134,6 +134,7 @@ def _convert(args: argparse.Namespace) -> int:
     from bagport.run import summary_json  # noqa: PLC0415
     from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
     from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
+    from flows.run_story import RunCounts  # noqa: PLC0415 - imports Prefect
 
     try:
         config = _convert_config(args)
@@ -156,11 +157,10 @@ def _convert(args: argparse.Namespace) -> int:
         where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
         print(f"excluded bags[{row['manifest_entry']}] {where}: {row['reason']}", file=sys.stderr)
     qa_report = f"; QA report: {report.root.rstrip('/')}/{report.qa_report}" if report.qa_report else ""
+    counts = RunCounts.of(report)  # this run's episodes, not the dataset's (an append holds more)
     print(
-        # an append reports the whole dataset, not only the episodes it added
-        f"{'the dataset now holds' if args.append else 'converted'} {report.duration_s:.1f} s of recordings "
-        f"({report.episodes} episode(s), "
-        f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time{qa_report}",
+        f"this run: {counts.text()} in {wall_s:.1f} s wall time; the dataset holds {report.episodes} "
+        f"episode(s), {report.duration_s:.1f} s of recordings{qa_report}",
         file=sys.stderr,
     )
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
@@ -273,6 +273,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bagport", description="ROS bags -> LeRobot v3.0 datasets.")
+    parser.add_argument("--version", action="version", version=f"bagport {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     convert = sub.add_parser("convert", help="convert the bags of a manifest with a contract (Prefect flow)")
@@ -403,6 +404,17 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version  # noqa: PLC0415
+
+    try:
+        return version("bagport")
+    except PackageNotFoundError:  # a source tree without the package installed
+        from bagport import __version__  # noqa: PLC0415
+
+        return __version__
+
+
 def _episodes_failed(err: BagportError) -> bool:
     """Exit code 1 (not 2): the input was fine, but episodes failed QA or conversion as configured."""
     from bagport.errors import QualityError  # noqa: PLC0415
@@ -418,6 +430,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ["PREFECT_LOGGING_LEVEL"] = "ERROR"
     else:
         os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
+    if not getattr(args, "verbose", False):
+        # Prefect's console lines repeat what bagport prints once (a failing bag's message came 4-6
+        # times); they still reach the API (the UI's run logs). --verbose shows them.
+        os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "CRITICAL")
     func: Callable[[argparse.Namespace], int] = args.func
     try:
         return func(args)

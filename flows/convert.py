@@ -7,7 +7,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from prefect import flow, get_run_logger, tags
+from prefect import flow, get_run_logger
 from prefect.client.schemas.objects import State
 from prefect.events.worker import EventsWorker
 from prefect.futures import PrefectFuture, as_completed
@@ -24,13 +24,21 @@ from bagport.errors import BagportError, QualityError
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
-from flows.local_server import take_launched
+from flows.local_server import ServerUnreachableError, check_reachable, take_launched
+from flows.run_story import completed_state
 from tasks.episode import convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
 from tasks.segment import segment_bag_task
 
-__all__ = ["ConversionError", "RayMissingError", "convert_flow", "run_config", "run_convert"]
+__all__ = [
+    "ConversionError",
+    "RayMissingError",
+    "ServerDownError",
+    "convert_flow",
+    "run_config",
+    "run_convert",
+]
 
 
 class ConversionError(BagportError):
@@ -114,7 +122,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         return Failed(message=reduced.message or "writing the dataset failed")
     report: DatasetReport = reduced.result()  # type: ignore[assignment] # completed: a report
     publish_run_artifacts(report)
-    return report
+    return completed_state(report)  # "Completed with exclusions" in run lists when bags were left out
 
 
 class _Episodes:
@@ -141,9 +149,10 @@ class _Episodes:
             self._submit((i, 0), request)
 
     def _submit(self, place: tuple[int, int], request: EpisodeRequest) -> None:
-        # Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
-        with tags(f"robot:{self._plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
-            future = convert_episode_task.submit(request.to_dict(), label=request.name)
+        task = convert_episode_task.with_options(
+            tags=_bag_tags(convert_episode_task.tags, self._plan, request)
+        )
+        future = task.submit(request.to_dict(), label=request.name)
         self._index[id(future)] = len(self.futures)
         self.futures.append(future)
         self._requests.append(request)
@@ -159,8 +168,17 @@ class _Episodes:
 
 
 def _submit_segment(plan: RunPlan, request: EpisodeRequest) -> PrefectFuture[Any]:
-    with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
-        return segment_bag_task.submit(request.to_dict(), label=_label(request.bag_uri))
+    task = segment_bag_task.with_options(tags=_bag_tags(segment_bag_task.tags, plan, request))
+    return task.submit(request.to_dict(), label=_label(request.bag_uri))
+
+
+def _bag_tags(task_tags: set[str], plan: RunPlan, request: EpisodeRequest) -> set[str]:
+    """Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
+
+    Set on the task itself, not with ``prefect.tags``: the process runner captures the tag context
+    once, at its first submit, and every task run would carry the first bag's tag.
+    """
+    return {*task_tags, f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"}
 
 
 def _segments_of(
@@ -244,6 +262,7 @@ def prefect_api() -> Iterator[None]:
             launched.stop()
         return
     if get_current_settings().api.url:
+        _require_server(str(get_current_settings().api.url))
         yield
         return
     from prefect.server.api.server import SubprocessASGIServer  # noqa: PLC0415 - only without a server
@@ -261,6 +280,18 @@ def prefect_api() -> Iterator[None]:
         else:
             os.environ["PREFECT_API_URL"] = previous
         server.stop()
+
+
+class ServerDownError(BagportError):
+    """The configured Prefect API does not answer."""
+
+
+def _require_server(api_url: str) -> None:
+    """One paragraph (exit 2) instead of Prefect's long traceback when the configured server is down."""
+    try:
+        check_reachable(api_url)
+    except ServerUnreachableError as err:
+        raise ServerDownError(str(err)) from None
 
 
 @contextmanager

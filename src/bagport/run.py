@@ -21,7 +21,9 @@ from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
+from bagport.dataset.base import read_base
 from bagport.dataset.history import converted_bags, dataset_report, record_exclusions
+from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.write import recover_interrupted_append, recover_publish
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
@@ -88,6 +90,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
         if is_local(fs):
             recover_interrupted_append(Path(out_path))
         done = converted_bags(config.output)
+        _refuse_incompatible_append(config, contract)
     elif fs.exists(out_path) and not config.overwrite:
         raise DatasetWriteError(
             f"{config.output} already exists; nothing was written. Fix: choose a new --output, or pass "
@@ -116,6 +119,26 @@ def plan_run(config: ConvertConfig) -> RunPlan:
         if not done or (bag.uri, source_stamp(bag.uri)) not in done
     )
     return RunPlan(config, contract, manifest, requests, contract_text, qa)
+
+
+def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -> None:
+    """Before anything converts: an append whose contract gives other features (or fps) than the
+    dataset's ``meta/info.json`` would be refused after converting every bag."""
+    info = read_base(config.output).info
+    have = sorted(set(info["features"]) - set(DEFAULT_FEATURES))
+    want = sorted(f.key for f in contract.features)
+    if have == want and info["fps"] == contract.fps:
+        return
+    differences = [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
+    if only_dataset := [k for k in have if k not in want]:
+        differences.append(f"only in the dataset: {', '.join(only_dataset)}")
+    if only_contract := [k for k in want if k not in have]:
+        differences.append(f"only in the contract: {', '.join(only_contract)}")
+    raise DatasetWriteError(
+        f"cannot append to {config.output} with {config.contract}: its features differ from the dataset's "
+        f"({'; '.join(differences)}); nothing was converted. Fix: append with the contract the dataset was "
+        "made with, or convert into a new --output."
+    )
 
 
 def window_key(window: dict[str, Any]) -> str:

@@ -12,7 +12,7 @@ import pytest
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
-from bagport.errors import QualityError
+from bagport.errors import DatasetWriteError, QualityError
 from bagport.run import EpisodeFailure, plan_run, reduce_run
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
@@ -133,3 +133,28 @@ def test_a_broken_bag_arriving_alone_is_recorded_excluded_and_not_retried(tmp_pa
     assert [Path(e["bag_uri"]).name for e in record["excluded"]] == ["broken.mcap"]
     assert plan_run(config).requests == ()  # unchanged: not retried
     assert validate_dataset(out, repo_id="test/alone", decode_every=10).episodes == 1
+
+
+def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Path) -> None:
+    """Finding 6 of issue 16: the append was refused only after every bag had been converted."""
+    bags = tmp_path / "bags"
+    write_episode_bag(bags / "first", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    out = tmp_path / "ds"
+    config = ConvertConfig(
+        bags_glob=str(bags / "*"),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(out),
+        encoder=FAST_CODEC,
+        append=True,
+    )
+    plan = plan_run(config)
+    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    write_episode_bag(bags / "second", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    text = SAMPLE_CONTRACT.read_text()
+    start = text.index("  - key: observation.images.wrist")
+    no_wrist = tmp_path / "no_wrist.yaml"
+    no_wrist.write_text(text[:start] + text[text.index("actions:") :])
+    with pytest.raises(
+        DatasetWriteError, match=r"only in the dataset: observation\.images\.wrist.*nothing was"
+    ):
+        plan_run(config.model_copy(update={"contract": str(no_wrist)}))

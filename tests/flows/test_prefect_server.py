@@ -51,15 +51,18 @@ async def _inspect(api_url: str) -> tuple[list[str], list[str], dict[str, object
         )
 
 
+@pytest.mark.parametrize("runner", ["thread", "process"])
 def test_conversion_is_visible_through_the_prefect_api(
-    tmp_path: Path, prefect_server: tuple[str, dict[str, str]]
+    tmp_path: Path, prefect_server: tuple[str, dict[str, str]], runner: str
 ) -> None:
+    """Under each runner every task run carries its own bag's tag (the process runner once tagged
+    every task run with the first bag's: issue 16, finding 2)."""
     api_url, env = prefect_server
     write_sample_fleet(tmp_path / "bags", episodes=2, duration_s=1.0)
     out = tmp_path / "dataset"
     proc = subprocess.run(
         [sys.executable, "-m", "flows.cli", "convert", "--manifest", str(tmp_path / "bags" / "manifest.yaml"),
-         "--contract", str(SAMPLE_CONTRACT), "--output", str(out), "--runner", "thread", "--codec", "h264-fast"],
+         "--contract", str(SAMPLE_CONTRACT), "--output", str(out), "--runner", runner, "--workers", "2", "--codec", "h264-fast"],
         env=env, cwd=REPO, capture_output=True, text=True, check=False, timeout=600,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -83,5 +86,5 @@ def test_conversion_is_visible_through_the_prefect_api(
     assert "episode_001" in qa_table
     assert "verdict" in qa_table
     assert "video PSNR min (dB)" in qa_table
-    assert "episodes kept: **2**" in str(artifacts["bagport-summary"])
+    assert "2 episode(s) converted" in str(artifacts["bagport-summary"])
     assert float(str(artifacts["bagport-progress"])) == pytest.approx(100.0)

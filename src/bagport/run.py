@@ -129,7 +129,9 @@ def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -
     want = sorted(f.key for f in contract.features)
     if have == want and info["fps"] == contract.fps:
         return
-    differences = [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
+    differences = (
+        [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
+    )
     if only_dataset := [k for k in have if k not in want]:
         differences.append(f"only in the dataset: {', '.join(only_dataset)}")
     if only_contract := [k for k in want if k not in have]:

@@ -1,4 +1,4 @@
-.PHONY: setup demo test lint bench
+.PHONY: setup demo test lint bench stack stack-down stack-status
 
 setup:
 	@bash scripts/setup.sh
@@ -11,3 +11,13 @@ test: setup
 
 bench: setup
 	@bash -c 'source scripts/env.sh && .venv/bin/python bench/run.py $(BENCH_ARGS)'
+
+# The services of docker/compose.yaml as native processes (PostgreSQL, Prefect server + worker, S3, Dask).
+stack: setup
+	@bash scripts/stack.sh up
+
+stack-down:
+	@bash scripts/stack.sh down
+
+stack-status:
+	@bash scripts/stack.sh status

@@ -17,6 +17,7 @@ from prefect.artifacts import (
 )
 
 from bagport.dataset import DatasetReport
+from flows.run_story import RunCounts
 
 __all__ = ["LISTENERS", "Progress", "ProgressListener", "publish_run_artifacts", "qa_table"]
 
@@ -93,8 +94,8 @@ def _markdown(report: DatasetReport) -> str:
     lines = [
         f"# bagport dataset `{report.root}`",
         "",
-        f"- episodes kept: **{report.episodes}**, excluded: **{len(report.excluded)}**",
-        f"- converted by this run: **{report.converted}**, reused from the staging store: **{len(report.reused)}**",
+        f"- this run: {RunCounts.of(report).text()}",
+        f"- the dataset holds **{report.episodes}** episode(s)",
         f"- frames: {report.frames}, duration: {report.duration_s:.1f} s, size: {report.size_bytes / 1e6:.1f} MB",
         f"- tasks: {', '.join(report.tasks)}",
         f"- videos: {', '.join(report.video_keys) or 'none'}",

@@ -162,21 +162,19 @@ def _convert(args: argparse.Namespace) -> int:
 
 
 def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
-    """One line: what the run converted, reused and left out, or that it had nothing to do."""
+    """One line: what this run wrote (reused, warned) and left out, or that it had nothing to do."""
     if append and not report.converted and not report.reused:
         return (
             f"nothing to do: every bag is in {report.root} already ({report.episodes} episode(s), "
             f"{report.duration_s:.1f} s of recordings); checked in {wall_s:.1f} s"
         )
+    from flows.run_story import RunCounts  # noqa: PLC0415 - imports Prefect
+
     qa_report = f"; QA report: {report.root.rstrip('/')}/{report.qa_report}" if report.qa_report else ""
-    work = f"{report.converted} converted, {len(report.reused)} reused from the staging store"
-    if report.reused and not report.converted:
-        work = f"nothing converted: all {len(report.reused)} reused from the staging store"
-    # an append reports the whole dataset, not only the episodes it added
+    counts = RunCounts.of(report)  # this run's episodes, not the dataset's (an append holds more)
     return (
-        f"{'the dataset now holds' if append else 'wrote'} {report.duration_s:.1f} s of recordings "
-        f"({report.episodes} episode(s), {len(report.excluded)} excluded; {work}) in {wall_s:.1f} s wall time"
-        f"{qa_report}"
+        f"this run: {counts.text()} in {wall_s:.1f} s wall time; the dataset holds {report.episodes} "
+        f"episode(s), {report.duration_s:.1f} s of recordings{qa_report}"
     )
 
 
@@ -307,6 +305,7 @@ def _cmd_synth(args: argparse.Namespace) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="bagport", description="ROS bags -> LeRobot v3.0 datasets.")
+    parser.add_argument("--version", action="version", version=f"bagport {_version()}")
     sub = parser.add_subparsers(dest="command", required=True)
 
     convert = sub.add_parser("convert", help="convert the bags of a manifest with a contract (Prefect flow)")
@@ -445,6 +444,17 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version  # noqa: PLC0415
+
+    try:
+        return version("bagport")
+    except PackageNotFoundError:  # a source tree without the package installed
+        from bagport import __version__  # noqa: PLC0415
+
+        return __version__
+
+
 def _episodes_failed(err: BagportError) -> bool:
     """Exit code 1 (not 2): the input was fine, but episodes failed QA or conversion as configured."""
     from bagport.errors import QualityError  # noqa: PLC0415
@@ -460,6 +470,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ["PREFECT_LOGGING_LEVEL"] = "ERROR"
     else:
         os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
+    if not getattr(args, "verbose", False):
+        # Prefect's console lines repeat what bagport prints once (a failing bag's message came 4-6
+        # times); they still reach the API (the UI's run logs). --verbose shows them.
+        os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "CRITICAL")
     func: Callable[[argparse.Namespace], int] = args.func
     _install_crash_hook()
     try:

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any
 
-from prefect import flow, get_run_logger, tags
+from prefect import flow, get_run_logger
 from prefect.client.schemas.objects import State
 from prefect.events.worker import EventsWorker
 from prefect.futures import PrefectFuture, as_completed
@@ -26,13 +26,21 @@ from bagport.errors import BagportError, QualityError
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
-from flows.local_server import take_launched
+from flows.local_server import ServerUnreachableError, check_reachable, take_launched
+from flows.run_story import completed_state
 from tasks.episode import convert_batch_task, convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
 from tasks.segment import segment_bag_task
 
-__all__ = ["ConversionError", "RayMissingError", "convert_flow", "run_config", "run_convert"]
+__all__ = [
+    "ConversionError",
+    "RayMissingError",
+    "ServerDownError",
+    "convert_flow",
+    "run_config",
+    "run_convert",
+]
 
 
 class ConversionError(BagportError):
@@ -118,7 +126,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         return Failed(message=reduced.message or "writing the dataset failed")
     report: DatasetReport = reduced.result()  # type: ignore[assignment] # completed: a report
     publish_run_artifacts(report)
-    return report
+    return completed_state(report)  # "Completed with exclusions" in run lists when bags were left out
 
 
 class _Episodes:
@@ -162,18 +170,21 @@ class _Episodes:
 
     def _submit(self, batch: list[tuple[tuple[int, int], EpisodeRequest]]) -> None:
         requests = [request for _, request in batch]
-        # Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
-        bag_tags = dict.fromkeys(f"bag:{_label(r.bag_uri)}" for r in requests)
         future: PrefectFuture[Any]
-        with tags(f"robot:{self._plan.contract.robot_type}", *bag_tags):
-            if len(requests) == 1:
-                future = convert_episode_task.submit(requests[0].to_dict(), label=requests[0].name)
-            else:
-                future = convert_batch_task.submit(
-                    [r.to_dict() for r in requests],
-                    labels=[r.name for r in requests],
-                    label=f"{requests[0].name} +{len(requests) - 1}",
-                )
+        if len(requests) == 1:
+            one = convert_episode_task.with_options(
+                tags=_bag_tags(convert_episode_task.tags, self._plan, requests)
+            )
+            future = one.submit(requests[0].to_dict(), label=requests[0].name)
+        else:
+            many = convert_batch_task.with_options(
+                tags=_bag_tags(convert_batch_task.tags, self._plan, requests)
+            )
+            future = many.submit(
+                [r.to_dict() for r in requests],
+                labels=[r.name for r in requests],
+                label=f"{requests[0].name} +{len(requests) - 1}",
+            )
         self._index[id(future)] = len(self.futures)
         self.futures.append(future)
         self._batches.append(batch)
@@ -218,8 +229,17 @@ def batch_size(episodes: int, workers: int) -> int:
 
 
 def _submit_segment(plan: RunPlan, request: EpisodeRequest) -> PrefectFuture[Any]:
-    with tags(f"robot:{plan.contract.robot_type}", f"bag:{_label(request.bag_uri)}"):
-        return segment_bag_task.submit(request.to_dict(), label=_label(request.bag_uri))
+    task = segment_bag_task.with_options(tags=_bag_tags(segment_bag_task.tags, plan, [request]))
+    return task.submit(request.to_dict(), label=_label(request.bag_uri))
+
+
+def _bag_tags(task_tags: set[str], plan: RunPlan, requests: Sequence[EpisodeRequest]) -> set[str]:
+    """Tags find a bag's task run in the UI in one click (filter by tag bag:<name> or robot:<type>).
+
+    Set on the task itself, not with ``prefect.tags``: the process runner captures the tag context
+    once, at its first submit, and every task run would carry the first bag's tag.
+    """
+    return {*task_tags, f"robot:{plan.contract.robot_type}", *(f"bag:{_label(r.bag_uri)}" for r in requests)}
 
 
 def _segments_of(
@@ -304,6 +324,7 @@ def prefect_api() -> Iterator[None]:
             launched.stop()
         return
     if get_current_settings().api.url:
+        _require_server(str(get_current_settings().api.url))
         yield
         return
     from prefect.server.api.server import SubprocessASGIServer  # noqa: PLC0415 - only without a server
@@ -321,6 +342,18 @@ def prefect_api() -> Iterator[None]:
         else:
             os.environ["PREFECT_API_URL"] = previous
         server.stop()
+
+
+class ServerDownError(BagportError):
+    """The configured Prefect API does not answer."""
+
+
+def _require_server(api_url: str) -> None:
+    """One paragraph (exit 2) instead of Prefect's long traceback when the configured server is down."""
+    try:
+        check_reachable(api_url)
+    except ServerUnreachableError as err:
+        raise ServerDownError(str(err)) from None
 
 
 @contextmanager

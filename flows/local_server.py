@@ -25,7 +25,14 @@ import urllib.request
 from pathlib import Path
 from typing import Any
 
-__all__ = ["LocalServer", "api_configured", "launch", "take_launched"]
+__all__ = [
+    "LocalServer",
+    "ServerUnreachableError",
+    "api_configured",
+    "check_reachable",
+    "launch",
+    "take_launched",
+]
 
 
 def _free_port() -> int:
@@ -48,6 +55,9 @@ class LocalServer:
             "PREFECT_UI_ENABLED": "0",
             "PREFECT__SERVER_EPHEMERAL": "1",
             "PREFECT__SERVER_FINAL": "1",
+            # offline, the telemetry service logs a red "Failed to send telemetry" ERROR (and once a
+            # "database is locked" traceback) on every run: bagport's own throwaway server sends none
+            "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         }
         env.pop("PREFECT_API_URL", None)
         self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
@@ -97,6 +107,26 @@ class LocalServer:
 
 
 _launched: LocalServer | None = None
+
+
+class ServerUnreachableError(RuntimeError):
+    """The configured Prefect API does not answer (the CLI turns it into one paragraph and exit 2)."""
+
+
+def check_reachable(api_url: str, timeout_s: float = 10) -> None:
+    """Raise :class:`ServerUnreachableError` unless ``api_url``/health answers."""
+    try:
+        with urllib.request.urlopen(f"{api_url.rstrip('/')}/health", timeout=timeout_s) as response:
+            if response.status == 200:
+                return
+            problem = f"it answered HTTP {response.status}"
+    except (urllib.error.URLError, ConnectionError, TimeoutError, ValueError) as err:
+        problem = f"{getattr(err, 'reason', err)}"
+    raise ServerUnreachableError(
+        f"the Prefect server at {api_url} does not answer ({problem}); nothing was converted. "
+        "Fix: start it (`prefect server start`, or `make stack` for the whole stack) or correct "
+        "PREFECT_API_URL; unset PREFECT_API_URL to let bagport start a temporary server of its own."
+    )
 
 
 def api_configured() -> bool:

@@ -4,6 +4,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/env.sh
 bash scripts/setup_browser.sh
+bash scripts/setup_stack.sh  # PostgreSQL for the native stack test (tests/stack)
 .venv/bin/ruff check src tasks flows tests bench
 .venv/bin/ruff format --check src tasks flows tests bench
 .venv/bin/mypy src/bagport tasks flows tests bench

@@ -20,7 +20,9 @@ from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
-from bagport.dataset.history import converted_bags
+from bagport.dataset.base import read_base
+from bagport.dataset.history import converted_bags, dataset_report, record_exclusions
+from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
@@ -119,6 +121,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
 
     if config.append and fs.exists(out_path):
         done = converted_bags(config.output)
+        _refuse_incompatible_append(config, contract)
     elif fs.exists(out_path) and not config.overwrite:
         raise DatasetWriteError(
             f"{config.output} already exists; nothing was written. Fix: choose a new --output, or pass "
@@ -160,6 +163,28 @@ def _take_staged(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
         return replace(plan, staged_ids=staged_ids)
     split = split_staged(plan.requests, staged_ids, stamp_of)
     return replace(plan, requests=split.todo, reused=split.reused, staged_ids=staged_ids)
+
+
+def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -> None:
+    """Before anything converts: an append whose contract gives other features (or fps) than the
+    dataset's ``meta/info.json`` would be refused after converting every bag."""
+    info = read_base(config.output).info
+    have = sorted(set(info["features"]) - set(DEFAULT_FEATURES))
+    want = sorted(f.key for f in contract.features)
+    if have == want and info["fps"] == contract.fps:
+        return
+    differences = (
+        [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
+    )
+    if only_dataset := [k for k in have if k not in want]:
+        differences.append(f"only in the dataset: {', '.join(only_dataset)}")
+    if only_contract := [k for k in want if k not in have]:
+        differences.append(f"only in the contract: {', '.join(only_contract)}")
+    raise DatasetWriteError(
+        f"cannot append to {config.output} with {config.contract}: its features differ from the dataset's "
+        f"({'; '.join(differences)}); nothing was converted. Fix: append with the contract the dataset was "
+        "made with, or convert into a new --output."
+    )
 
 
 def window_key(window: dict[str, Any]) -> str:
@@ -290,7 +315,8 @@ def select_episodes(
                 metadata=episode.metadata,
             )
         )
-    if not kept:
+    if not kept and not _appends_to_existing(plan):
+        # (an append still records the exclusions, so an unchanged bad bag is not retried by every run)
         reasons = "\n".join(
             f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries
         )
@@ -304,6 +330,11 @@ def select_episodes(
 
 def _episode_name(bag_uri: str, segment: int | None) -> str:
     return bag_uri if segment is None else f"{bag_uri}#{segment}"
+
+
+def _appends_to_existing(plan: RunPlan) -> bool:
+    fs, out_path = url_to_fs(plan.config.output)
+    return plan.config.append and bool(fs.exists(out_path))
 
 
 def reduce_run(
@@ -331,6 +362,10 @@ def reduce_run(
     record["excluded"] = [
         {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
     ]
+    if not kept:  # an append whose new bags were all excluded: recorded, nothing written
+        record_exclusions(plan.config.output, record)
+        excluded = tuple(e.brief() for e in entries)
+        return replace(dataset_report(plan.config.output), excluded=excluded, qa=excluded)
     report = write_dataset(
         kept,
         plan.config.output,

@@ -11,7 +11,8 @@ import pytest
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
-from bagport.errors import QualityError
+from bagport.episode import convert_episode
+from bagport.errors import DatasetWriteError, QualityError
 from bagport.run import EpisodeFailure, plan_run, reduce_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
@@ -110,3 +111,50 @@ def test_nothing_left_is_an_error_that_says_how_to_fix_it(fleet: Path, tmp_path:
     config, staged = _run(fleet, tmp_path / "ds")
     with pytest.raises(QualityError, match=r"(?s)no episode is left to write.*--on-qa-fail keep"):
         reduce_run(plan_run(config), staged[1:2])
+
+
+def test_a_broken_bag_arriving_alone_is_recorded_excluded_and_not_retried(tmp_path: Path) -> None:
+    """Finding 4 of issue 16: an append whose only new bag fails records the exclusion (the next
+    scheduled run skips the unchanged bag) instead of failing with "no episode is left"."""
+    bags = tmp_path / "bags"
+    write_episode_bag(bags / "good", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    out = tmp_path / "ds"
+    options = {"bags_glob": str(bags / "*"), "contract": str(SAMPLE_CONTRACT), "output": str(out)}
+    config = ConvertConfig(**options, encoder=FAST_CODEC, append=True)  # type: ignore[arg-type]
+    plan = plan_run(config)
+    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    (bags / "broken.mcap").write_bytes(b"not a bag at all")
+    plan = plan_run(config)
+    assert [Path(r.bag_uri).name for r in plan.requests] == ["broken.mcap"]
+    failure = EpisodeFailure.of(plan.requests[0], "broken.mcap: not an MCAP file")
+    report = reduce_run(plan, [], [failure])
+    assert report.episodes == 1
+    record = json.loads((out / "meta/provenance/run-001.json").read_text())
+    assert [Path(e["bag_uri"]).name for e in record["excluded"]] == ["broken.mcap"]
+    assert plan_run(config).requests == ()  # unchanged: not retried
+    assert validate_dataset(out, repo_id="test/alone", decode_every=10).episodes == 1
+
+
+def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Path) -> None:
+    """Finding 6 of issue 16: the append was refused only after every bag had been converted."""
+    bags = tmp_path / "bags"
+    write_episode_bag(bags / "first", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    out = tmp_path / "ds"
+    config = ConvertConfig(
+        bags_glob=str(bags / "*"),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(out),
+        encoder=FAST_CODEC,
+        append=True,
+    )
+    plan = plan_run(config)
+    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    write_episode_bag(bags / "second", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    text = SAMPLE_CONTRACT.read_text()
+    start = text.index("  - key: observation.images.wrist")
+    no_wrist = tmp_path / "no_wrist.yaml"
+    no_wrist.write_text(text[:start] + text[text.index("actions:") :])
+    with pytest.raises(
+        DatasetWriteError, match=r"only in the dataset: observation\.images\.wrist.*nothing was"
+    ):
+        plan_run(config.model_copy(update={"contract": str(no_wrist)}))

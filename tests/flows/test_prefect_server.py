@@ -4,12 +4,8 @@ from __future__ import annotations
 
 import asyncio
 import os
-import signal
-import socket
 import subprocess
 import sys
-import time
-import urllib.request
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -25,56 +21,15 @@ from prefect.settings import PREFECT_API_URL, temporary_settings
 
 from bagport.synth import write_sample_fleet
 from tests.helpers import REPO, SAMPLE_CONTRACT
+from tests.prefect_server import prefect_server as running_prefect_server
 
 pytestmark = pytest.mark.slow
 
 
-def _free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 @pytest.fixture
 def prefect_server(tmp_path: Path) -> Iterator[tuple[str, dict[str, str]]]:
-    port = _free_port()
-    env = {
-        **os.environ,
-        "PREFECT_HOME": str(tmp_path / "prefect-home"),
-        "PREFECT_SERVER_DATABASE_CONNECTION_URL": f"sqlite+aiosqlite:///{tmp_path / 'prefect.db'}",
-        "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
-        "PREFECT_UI_ENABLED": "false",
-    }
-    env.pop("PREFECT_API_URL", None)
-    prefect = str(Path(sys.executable).with_name("prefect"))
-    server = subprocess.Popen(
-        [prefect, "server", "start", "--host", "127.0.0.1", "--port", str(port)],
-        env=env,
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.DEVNULL,
-        start_new_session=True,
-    )
-    api_url = f"http://127.0.0.1:{port}/api"
-    try:
-        deadline = time.monotonic() + 180
-        while True:
-            try:
-                with urllib.request.urlopen(f"{api_url}/health", timeout=2) as response:
-                    if response.status == 200:
-                        break
-            except OSError:
-                pass
-            assert server.poll() is None, "prefect server exited during start-up"
-            assert time.monotonic() < deadline, "prefect server did not answer /api/health within 180 s"
-            time.sleep(0.5)
-        yield api_url, {**env, "PREFECT_API_URL": api_url}
-    finally:
-        os.killpg(server.pid, signal.SIGTERM)  # the server and its workers, by PID
-        try:
-            server.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            os.killpg(server.pid, signal.SIGKILL)
-            server.wait()
+    with running_prefect_server(tmp_path) as server:
+        yield server
 
 
 async def _inspect(api_url: str) -> tuple[list[str], list[str], dict[str, object]]:
@@ -96,15 +51,18 @@ async def _inspect(api_url: str) -> tuple[list[str], list[str], dict[str, object
         )
 
 
+@pytest.mark.parametrize("runner", ["thread", "process"])
 def test_conversion_is_visible_through_the_prefect_api(
-    tmp_path: Path, prefect_server: tuple[str, dict[str, str]]
+    tmp_path: Path, prefect_server: tuple[str, dict[str, str]], runner: str
 ) -> None:
+    """Under each runner every task run carries its own bag's tag (the process runner once tagged
+    every task run with the first bag's: issue 16, finding 2)."""
     api_url, env = prefect_server
     write_sample_fleet(tmp_path / "bags", episodes=2, duration_s=1.0)
     out = tmp_path / "dataset"
     proc = subprocess.run(
         [sys.executable, "-m", "flows.cli", "convert", "--manifest", str(tmp_path / "bags" / "manifest.yaml"),
-         "--contract", str(SAMPLE_CONTRACT), "--output", str(out), "--runner", "thread", "--codec", "h264-fast"],
+         "--contract", str(SAMPLE_CONTRACT), "--output", str(out), "--runner", runner, "--workers", "2", "--codec", "h264-fast"],
         env=env, cwd=REPO, capture_output=True, text=True, check=False, timeout=600,
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
@@ -128,5 +86,5 @@ def test_conversion_is_visible_through_the_prefect_api(
     assert "episode_001" in qa_table
     assert "verdict" in qa_table
     assert "video PSNR min (dB)" in qa_table
-    assert "episodes kept: **2**" in str(artifacts["bagport-summary"])
+    assert "2 episode(s) converted" in str(artifacts["bagport-summary"])
     assert float(str(artifacts["bagport-progress"])) == pytest.approx(100.0)

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import pandas as pd
 from fsspec.core import url_to_fs
 
-from bagport.dataset.layout import INFO_PATH, TASKS_PATH
+from bagport.dataset.base import read_base
+from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, INFO_PATH, TASKS_PATH
 from bagport.dataset.write import DatasetReport
 
-__all__ = ["converted_bags", "dataset_report"]
+__all__ = ["converted_bags", "dataset_report", "record_exclusions"]
 
 
 def converted_bags(root: str) -> set[tuple[str, str]]:
@@ -47,3 +49,15 @@ def dataset_report(root: str) -> DatasetReport:
         size,
         frames / info["fps"],
     )
+
+
+def record_exclusions(root: str, run_record: dict[str, Any]) -> str:
+    """Record an append run that kept no episode (its bags were all excluded) as the next
+    ``run-NNN.json``, data untouched; the URI of the record. Its ``excluded`` entries keep an
+    unchanged bad bag from being retried by every scheduled run (see :func:`converted_bags`)."""
+    fs, path = url_to_fs(root)
+    run = read_base(root).run_number
+    record_path = f"{path.rstrip('/')}/{APPEND_RUN_RECORD_PATH.format(run=run)}"
+    with fs.open(record_path, "w", encoding="utf-8") as handle:
+        json.dump({**run_record, "episodes": []}, handle, indent=2, default=str)
+    return str(fs.unstrip_protocol(record_path))

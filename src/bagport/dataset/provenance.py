@@ -88,6 +88,7 @@ def write_provenance(
             "window_ns": list(s.window_ns) if s.window_ns is not None else None,
             "label": s.label,
             "label_note": s.note,
+            "reused_clips": dict(s.reused_clips),  # camera key -> the staged episode its clip came from
         }
         for i, s in enumerate(summaries, first_episode)
     ]

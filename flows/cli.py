@@ -115,6 +115,8 @@ def _convert_config(args: argparse.Namespace) -> ConvertConfig:
         keep_failed=args.keep_failed,
         msg_path=args.msg_path,
         fail_fast=args.fail_fast,
+        formats=tuple(f.strip() for f in args.format.split(",") if f.strip()),
+        hdf5_jpeg_quality=args.hdf5_jpeg,
     )
 
 
@@ -151,6 +153,9 @@ def _convert(args: argparse.Namespace) -> int:
             print(file=sys.stderr)
     if not args.quiet:
         print(summary_json(report))
+    for fmt, output in report.outputs.items():
+        if output != report.root:
+            print(f"wrote {fmt} at {output}", file=sys.stderr)
     wall_s = time.perf_counter() - started
     for row in report.excluded:
         where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
@@ -342,6 +347,19 @@ def _parser() -> argparse.ArgumentParser:
         "--fail-fast",
         action="store_true",
         help="stop at the first bag that fails to convert, writing nothing (default: report it, convert the others)",
+    )
+    convert.add_argument(
+        "--format",
+        default="lerobot",
+        help="outputs, comma-separated: lerobot (default), hdf5 (ALOHA/ACT layout; extra bagport[hdf5]), robodm "
+        "(extra bagport[robodm]); LeRobot's goes to --output, each other one to <output>.<format>",
+    )
+    convert.add_argument(
+        "--hdf5-jpeg",
+        type=int,
+        default=None,
+        metavar="QUALITY",
+        help="HDF5 images as JPEG of this quality (1-100), like ALOHA's compressed episodes (default: raw uint8)",
     )
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(

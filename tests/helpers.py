@@ -6,13 +6,22 @@ from pathlib import Path
 from typing import Any
 
 from bagport.episode import EpisodeRequest, episode_id_for
+from bagport.staging import EpisodeSummary
 from tests.conftest import REALBAGS, REPO
 
 SAMPLE_CONTRACT = REPO / "configs" / "contracts" / "sample_robot.yaml"
 FAST_CODEC = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 """Near-lossless and quick: for tests that check pixels exactly, not the default codec."""
 
-__all__ = ["FAST_CODEC", "REALBAGS", "REPO", "SAMPLE_CONTRACT", "episode_request", "realbag"]
+__all__ = [
+    "FAST_CODEC",
+    "REALBAGS",
+    "REPO",
+    "SAMPLE_CONTRACT",
+    "episode_request",
+    "realbag",
+    "staged_episodes",
+]
 
 
 def realbag(relative: str) -> Path:
@@ -46,3 +55,23 @@ def episode_request(
         encoder=codec,
         default_task=task,
     )
+
+
+def staged_episodes(root: Path, durations_s: tuple[float, ...]) -> list[EpisodeSummary]:
+    """Episodes of the sample contract (two 32x32 cameras: raw and JPEG) staged under ``root``/staging,
+    one synthetic bag each, with :data:`FAST_CODEC`."""
+    from bagport.episode import convert_episode  # noqa: PLC0415
+    from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag  # noqa: PLC0415
+
+    cameras = (
+        CameraSpec("front", "raw", "bgr8", height=32, width=32),
+        CameraSpec("wrist", "jpeg", height=32, width=32),
+    )
+    summaries = []
+    for i, duration_s in enumerate(durations_s):
+        bag = root / f"ep{i}"
+        write_episode_bag(
+            bag, "mcap", EpisodeSpec(duration_s=duration_s, seed=i, cameras=cameras, task=f"task {i}")
+        )
+        summaries.append(convert_episode(episode_request(bag, root / "staging")))
+    return summaries

@@ -25,6 +25,7 @@ from bagport.dataset.history import converted_bags
 from bagport.dataset.write import recover_interrupted_append, recover_publish
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.errors import DatasetWriteError, QualityError
+from bagport.formats import check_format_outputs, write_formats
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
 from bagport.segment import EXCLUDED_LABELS, kept_segmentation, label_reason, segment_request, segments_bags
@@ -93,6 +94,7 @@ def plan_run(config: ConvertConfig) -> RunPlan:
             f"{config.output} already exists; nothing was written. Fix: choose a new --output, or pass "
             "--overwrite to replace it (the old dataset stays until the new one is complete)."
         )
+    check_format_outputs(config)
     staging = config.resolved_staging()
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
@@ -253,17 +255,27 @@ def reduce_run(
     record["excluded"] = [
         {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
     ]
-    report = write_dataset(
-        kept,
-        plan.config.output,
-        robot_type=plan.contract.robot_type,
-        limits=limits,
-        run_record=record,
-        overwrite=plan.config.overwrite,
-        qa=entries,
-        qa_config=plan.qa.model_dump(mode="json"),
-        append=plan.config.append,
+    formats = plan.config.formats
+    report = (
+        write_dataset(
+            kept,
+            plan.config.output,
+            robot_type=plan.contract.robot_type,
+            limits=limits,
+            run_record=record,
+            overwrite=plan.config.overwrite,
+            qa=entries,
+            qa_config=plan.qa.model_dump(mode="json"),
+            append=plan.config.append,
+        )
+        if "lerobot" in formats
+        else None
     )
+    # the same kept episodes, from the same staging, into every other format (no second read of the bags)
+    others = write_formats(
+        kept, plan.config, robot_type=plan.contract.robot_type, run_record=record, qa=entries
+    )
+    report = replace(report or others[formats[0]], outputs=plan.config.format_outputs())
     if not plan.config.keep_staging:
         _remove_staged(plan, staged_dirs)
     return report
@@ -296,6 +308,7 @@ def summary_json(report: DatasetReport) -> str:
             "videos": list(report.video_keys),
             "size_bytes": report.size_bytes,
             "excluded": list(report.excluded),
+            "outputs": report.outputs,
         },
         indent=2,
     )

@@ -6,7 +6,7 @@ import shutil
 import tempfile
 import uuid
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -46,6 +46,8 @@ class DatasetReport:
     """Every bag's QA brief: episode index (None when excluded), score, verdict, reason."""
     qa_report: str | None = None
     """This run's HTML QA report in the dataset (an append's is ``meta/qa/report-NNN.html``)."""
+    outputs: dict[str, str] = field(default_factory=dict)
+    """Every format the run wrote (``--format``): format -> its output (:mod:`bagport.formats`)."""
 
 
 def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeature, ...]:

@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     import pydantic
 
     from bagport.config import ConvertConfig
+    from bagport.hub import ProvenanceChoice
 
 __all__ = ["main"]
 
@@ -141,6 +142,13 @@ def _convert(args: argparse.Namespace) -> int:
         config = _convert_config(args)
     except pydantic.ValidationError as err:
         raise BagportError(f"invalid options: {_option_errors(err)}") from err
+    if args.push_to_hub and (args.repo_id is None or "lerobot" not in config.formats):
+        raise BagportError(
+            "--push-to-hub publishes the LeRobot dataset under --repo-id: give --repo-id ORG/NAME and keep lerobot "
+            "in --format"
+        )
+    if args.push_to_hub:
+        _hf_token()  # before converting, not after
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
     if show_bar:
@@ -168,8 +176,59 @@ def _convert(args: argparse.Namespace) -> int:
         f"{len(report.excluded)} excluded) in {wall_s:.1f} s wall time{qa_report}",
         file=sys.stderr,
     )
+    if args.push_to_hub:
+        _push(report.outputs.get("lerobot", report.root), config.resolved_repo_id(), args)
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
     return 1 if any(not row.get("excluded_by_label") for row in report.excluded) else 0
+
+
+def _hf_token() -> str:
+    token = os.environ.get("HF_TOKEN", "")
+    if not token:
+        raise BagportError(
+            "HF_TOKEN is not set; nothing was pushed. Fix: export HF_TOKEN=<a write token of your Hugging Face "
+            "account> (it is read from the environment only, never from an option, and never printed)."
+        )
+    return token
+
+
+def _push(root: str, repo_id: str, args: argparse.Namespace) -> int:
+    from bagport.hub import push_dataset  # noqa: PLC0415 - keep `--help` fast
+
+    provenance: ProvenanceChoice = (
+        "excluded" if args.exclude_provenance else "full" if args.full_provenance else "redacted"
+    )
+    report = push_dataset(
+        Path(root),
+        repo_id,
+        token=_hf_token(),
+        private=True if args.private else None,
+        revision=args.revision,
+        provenance=provenance,
+    )
+    print(report.summary(), file=sys.stderr)
+    return 0
+
+
+def _cmd_push(args: argparse.Namespace) -> int:
+    return _push(args.root, args.repo_id, args)
+
+
+def _push_options(command: argparse.ArgumentParser) -> None:
+    command.add_argument("--private", action="store_true", help="create the Hub repo private")
+    command.add_argument("--revision", default=None, help="push to this branch (default: main)")
+    choice = command.add_mutually_exclusive_group()
+    choice.add_argument(
+        "--exclude-provenance",
+        action="store_true",
+        help="do not publish meta/provenance (the QA record redacted)",
+    )
+    choice.add_argument(
+        "--full-provenance",
+        action="store_true",
+        help="publish meta/provenance and meta/qa as written, with bag paths and manifest metadata "
+        "(default: a redacted copy, paths reduced to bag names, metadata removed)",
+    )
 
 
 def _cmd_qa(args: argparse.Namespace) -> int:
@@ -361,6 +420,13 @@ def _parser() -> argparse.ArgumentParser:
         metavar="QUALITY",
         help="HDF5 images as JPEG of this quality (1-100), like ALOHA's compressed episodes (default: raw uint8)",
     )
+    convert.add_argument(
+        "--push-to-hub",
+        action="store_true",
+        help="after converting, push the LeRobot dataset to the Hugging Face Hub as --repo-id (HF_TOKEN from the "
+        "environment; see `bagport push`)",
+    )
+    _push_options(convert)
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(
         "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
@@ -390,6 +456,14 @@ def _parser() -> argparse.ArgumentParser:
     validate.add_argument("--repo-id", default=None)
     validate.add_argument("--every", type=int, default=1, help="decode every n-th frame (default: all)")
     validate.set_defaults(func=_cmd_validate)
+
+    push = sub.add_parser(
+        "push", help="upload a LeRobot dataset to the Hugging Face Hub (HF_TOKEN from the environment)"
+    )
+    push.add_argument("root", help="dataset folder (local)")
+    push.add_argument("--repo-id", required=True, help="Hub dataset repo, ORG/NAME")
+    _push_options(push)
+    push.set_defaults(func=_cmd_push)
 
     contract = sub.add_parser("contract", help="work with contracts")
     contract_sub = contract.add_subparsers(dest="contract_command", required=True)

@@ -411,7 +411,8 @@ def _parser() -> argparse.ArgumentParser:
         "--format",
         default="lerobot",
         help="outputs, comma-separated: lerobot (default), hdf5 (ALOHA/ACT layout; extra bagport[hdf5]), robodm "
-        "(extra bagport[robodm]); LeRobot's goes to --output, each other one to <output>.<format>",
+        "(Robo-DM trajectories; extra bagport[robodm]); LeRobot's goes to --output, each other one to "
+        "<output>.<format>",
     )
     convert.add_argument(
         "--hdf5-jpeg",

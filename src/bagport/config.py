@@ -72,7 +72,7 @@ class ConvertConfig(BaseModel):
         description="Folder of .msg files (<pkg>/msg/<Type>.msg) for types the bags do not embed; "
         "read once and sent to the workers with each episode.",
     )
-    formats: tuple[Literal["lerobot", "hdf5"], ...] = Field(
+    formats: tuple[Literal["lerobot", "hdf5", "robodm"], ...] = Field(
         default=("lerobot",),
         description="Outputs to write from the same staged episodes: lerobot (at output), hdf5 (ALOHA/ACT "
         "layout, one file per episode), robodm (one Robo-DM trajectory per episode); the first non-LeRobot "

@@ -17,13 +17,14 @@ import pytest
 import yaml
 
 from bagport.formats.hdf5 import hdf5_path
+from bagport.formats.robodm import trajectory_class
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, REPO, SAMPLE_CONTRACT
 from tests.lerobot_frames import LeRobotFrame, lerobot_frames
 
 pytestmark = pytest.mark.slow
 
-FORMATS = "lerobot,hdf5"
+FORMATS = "lerobot,robodm,hdf5"
 CAMERAS = (
     CameraSpec("front", "raw", "bgr8", height=32, width=32),
     CameraSpec("wrist", "jpeg", height=32, width=32),
@@ -76,14 +77,31 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[LeRobotF
 
 def test_every_format_holds_the_same_episodes_with_provenance(fleet: tuple[Path, list[LeRobotFrame]]) -> None:
     root, frames = fleet
-    for out in (root / "ds", root / "ds.hdf5"):
+    for out in (root / "ds", root / "ds.hdf5", root / "ds.robodm"):
         run = json.loads((out / "meta/provenance/run.json").read_text())
         assert [e["bag_uri"] for e in run["episodes"]] == [str(root / "ep0"), str(root / "ep1")], out
         assert [e["bag_uri"] for e in run["excluded"]] == [str(root / "broken.mcap")], out
         assert run["episodes"][0]["metadata"] == {"operator": "ana"}
         assert (out / "meta/provenance/chunk-000/file-000.parquet").is_file()
     assert sorted(p.name for p in (root / "ds.hdf5").glob("*.hdf5")) == ["episode_0.hdf5", "episode_1.hdf5"]
+    assert sorted(p.name for p in (root / "ds.robodm").glob("*.vla")) == ["episode_0.vla", "episode_1.vla"]
     assert {f.episode_index for f in frames} == {0, 1}
+
+
+def test_robodm_agrees_with_lerobot_frame_by_frame(fleet: tuple[Path, list[LeRobotFrame]]) -> None:
+    root, frames = fleet
+    trajectory = trajectory_class()
+    loaded = [trajectory(str(root / "ds.robodm" / f"episode_{i}.vla"), mode="r").load() for i in range(2)]
+    assert [json.loads(data["episode"][0])["tasks"] for data in loaded] == [["task 0"], ["task 1"]]
+    assert json.loads(loaded[0]["episode"][0])["metadata"] == {"operator": "ana"}
+    assert sum(len(data["action"]) for data in loaded) == len(frames)
+    for frame in frames:
+        data, n = loaded[frame.episode_index], frame.frame_index
+        np.testing.assert_array_equal(data["observation.state"][n], frame.vectors["observation.state"])
+        np.testing.assert_array_equal(data["action"][n], frame.vectors["action"])
+        assert data["timestamp"][n] == np.float32(frame.timestamp)
+        for key, image in frame.images.items():
+            assert np.abs(data[key][n].astype(int) - image.astype(int)).max() <= 1
 
 
 def test_hdf5_agrees_with_lerobot_frame_by_frame(fleet: tuple[Path, list[LeRobotFrame]]) -> None:
@@ -111,7 +129,9 @@ def test_a_rerun_rebuilds_every_output_from_staging_without_reading_bags(
     staged = _staged(root)
     assert len(staged) == 2
     (root / "ds.hdf5" / "episode_1.hdf5").unlink()  # as a partial output from an interrupted run would be
+    (root / "ds.robodm" / "episode_0.vla").unlink()
     assert _convert(root, "--overwrite") == 1
     assert _staged(root) == staged  # the staged episodes were reused, none converted again
     with h5py.File(root / "ds.hdf5" / "episode_1.hdf5", "r") as f:
         assert f["action"].shape[0] == sum(fr.episode_index == 1 for fr in frames)
+    assert (root / "ds.robodm" / "episode_0.vla").is_file()

@@ -51,4 +51,15 @@ def write_formats(
                 qa=qa,
                 jpeg_quality=config.hdf5_jpeg_quality,
             )
+        elif fmt == "robodm":
+            from bagport.formats.robodm import write_robodm_dataset  # noqa: PLC0415 - needs the robodm extra
+
+            reports[fmt] = write_robodm_dataset(
+                summaries,
+                output,
+                robot_type=robot_type,
+                run_record=run_record,
+                overwrite=config.overwrite,
+                qa=qa,
+            )
     return reports

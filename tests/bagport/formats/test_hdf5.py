@@ -10,24 +10,14 @@ import h5py
 import numpy as np
 import pytest
 
-from bagport.dataset import write_dataset
 from bagport.errors import DatasetWriteError
 from bagport.formats.hdf5 import hdf5_path, write_hdf5_dataset
 from bagport.staging import EpisodeSummary
-from tests.helpers import staged_episodes
 from tests.lerobot_frames import lerobot_frames
 
 pytestmark = pytest.mark.slow
 
 CAMERAS = ("observation.images.front", "observation.images.wrist")
-
-
-@pytest.fixture(scope="module")
-def staged(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[EpisodeSummary]]:
-    root = tmp_path_factory.mktemp("hdf5")
-    summaries = staged_episodes(root, durations_s=(0.5, 0.8))
-    write_dataset(summaries, str(root / "ds"), robot_type="bagport_sample_arm")
-    return root, summaries
 
 
 def test_the_mapping_of_contract_keys() -> None:

@@ -17,12 +17,12 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from bagport.errors import BagportError
+from flows.cli_push import add_push_command, add_push_options, hf_token, push_from_args
 
 if TYPE_CHECKING:
     import pydantic
 
     from bagport.config import ConvertConfig
-    from bagport.hub import ProvenanceChoice
 
 __all__ = ["main"]
 
@@ -148,7 +148,7 @@ def _convert(args: argparse.Namespace) -> int:
             "in --format"
         )
     if args.push_to_hub:
-        _hf_token()  # before converting, not after
+        hf_token()  # before converting, not after
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
     if show_bar:
@@ -177,58 +177,9 @@ def _convert(args: argparse.Namespace) -> int:
         file=sys.stderr,
     )
     if args.push_to_hub:
-        _push(report.outputs.get("lerobot", report.root), config.resolved_repo_id(), args)
+        push_from_args(report.outputs.get("lerobot", report.root), config.resolved_repo_id(), args)
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
     return 1 if any(not row.get("excluded_by_label") for row in report.excluded) else 0
-
-
-def _hf_token() -> str:
-    token = os.environ.get("HF_TOKEN", "")
-    if not token:
-        raise BagportError(
-            "HF_TOKEN is not set; nothing was pushed. Fix: export HF_TOKEN=<a write token of your Hugging Face "
-            "account> (it is read from the environment only, never from an option, and never printed)."
-        )
-    return token
-
-
-def _push(root: str, repo_id: str, args: argparse.Namespace) -> int:
-    from bagport.hub import push_dataset  # noqa: PLC0415 - keep `--help` fast
-
-    provenance: ProvenanceChoice = (
-        "excluded" if args.exclude_provenance else "full" if args.full_provenance else "redacted"
-    )
-    report = push_dataset(
-        Path(root),
-        repo_id,
-        token=_hf_token(),
-        private=True if args.private else None,
-        revision=args.revision,
-        provenance=provenance,
-    )
-    print(report.summary(), file=sys.stderr)
-    return 0
-
-
-def _cmd_push(args: argparse.Namespace) -> int:
-    return _push(args.root, args.repo_id, args)
-
-
-def _push_options(command: argparse.ArgumentParser) -> None:
-    command.add_argument("--private", action="store_true", help="create the Hub repo private")
-    command.add_argument("--revision", default=None, help="push to this branch (default: main)")
-    choice = command.add_mutually_exclusive_group()
-    choice.add_argument(
-        "--exclude-provenance",
-        action="store_true",
-        help="do not publish meta/provenance (the QA record redacted)",
-    )
-    choice.add_argument(
-        "--full-provenance",
-        action="store_true",
-        help="publish meta/provenance and meta/qa as written, with bag paths and manifest metadata "
-        "(default: a redacted copy, paths reduced to bag names, metadata removed)",
-    )
 
 
 def _cmd_qa(args: argparse.Namespace) -> int:
@@ -427,7 +378,7 @@ def _parser() -> argparse.ArgumentParser:
         help="after converting, push the LeRobot dataset to the Hugging Face Hub as --repo-id (HF_TOKEN from the "
         "environment; see `bagport push`)",
     )
-    _push_options(convert)
+    add_push_options(convert)
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(
         "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
@@ -458,13 +409,7 @@ def _parser() -> argparse.ArgumentParser:
     validate.add_argument("--every", type=int, default=1, help="decode every n-th frame (default: all)")
     validate.set_defaults(func=_cmd_validate)
 
-    push = sub.add_parser(
-        "push", help="upload a LeRobot dataset to the Hugging Face Hub (HF_TOKEN from the environment)"
-    )
-    push.add_argument("root", help="dataset folder (local)")
-    push.add_argument("--repo-id", required=True, help="Hub dataset repo, ORG/NAME")
-    _push_options(push)
-    push.set_defaults(func=_cmd_push)
+    add_push_command(sub)
 
     contract = sub.add_parser("contract", help="work with contracts")
     contract_sub = contract.add_subparsers(dest="contract_command", required=True)

@@ -27,6 +27,8 @@ def reduce_task(
         return Failed(message=str(err))
     logger = get_run_logger()
     logger.info("wrote %d episode(s), %d frames to %s", report.episodes, report.frames, report.root)
+    for fmt, output in report.outputs.items():
+        logger.info("wrote %s at %s", fmt, output)
     for row in report.excluded:
         logger.warning("excluded %s: %s", row["bag_uri"], row["reason"])
     return report

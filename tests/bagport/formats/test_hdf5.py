@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import cv2
@@ -109,3 +110,39 @@ def test_existing_output_is_kept_and_a_failed_write_changes_nothing(
         write_hdf5_dataset([summaries[0], broken], str(out), robot_type="r", run_record={}, overwrite=True)
     assert sorted(p.name for p in out.iterdir()) == ["episode_0.hdf5", "meta"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds.hdf5"]  # no build folder left
+
+
+def test_staging_and_output_on_an_object_store(
+    tmp_path: Path, staged: tuple[Path, list[EpisodeSummary]], s3_env: dict[str, str]
+) -> None:
+    """Clips streamed from S3 staging, the output uploaded under the journal; equal to a local write."""
+    import s3fs  # noqa: PLC0415 - the S3 tests only
+
+    _, summaries = staged
+    fs = s3fs.S3FileSystem(endpoint_url=s3_env["AWS_ENDPOINT_URL"])
+    fs.mkdir("formats")
+    remote = []
+    for summary in summaries:
+        fs.put(summary.dir_uri, f"formats/staging/{summary.episode_id}", recursive=True)
+        remote.append(replace(summary, dir_uri=f"s3://formats/staging/{summary.episode_id}"))
+    write_hdf5_dataset(remote[:1], "s3://formats/ds.hdf5", robot_type="r", run_record={})
+    write_hdf5_dataset(remote, "s3://formats/ds.hdf5", robot_type="r", run_record={}, overwrite=True)
+    assert sorted(p.rsplit("/", 1)[-1] for p in fs.ls("formats/ds.hdf5")) == [
+        "episode_0.hdf5",
+        "episode_1.hdf5",
+        "meta",
+    ]
+    fs.get("formats/ds.hdf5/episode_1.hdf5", str(tmp_path / "remote.hdf5"))
+    write_hdf5_dataset(summaries, str(tmp_path / "local"), robot_type="r", run_record={})
+    with (
+        h5py.File(tmp_path / "remote.hdf5", "r") as a,
+        h5py.File(tmp_path / "local/episode_1.hdf5", "r") as b,
+    ):
+        for name in (
+            "observations/qpos",
+            "action",
+            "observations/images/front",
+            "observations/images/wrist",
+            "tick_ns",
+        ):
+            np.testing.assert_array_equal(a[name][:], b[name][:])

@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING, Any
 import yaml
 
 from bagport.errors import BagportError
+from flows.cli_push import add_push_command, add_push_options, hf_token, push_from_args
 
 if TYPE_CHECKING:
     import pydantic
@@ -116,6 +117,8 @@ def _convert_config(args: argparse.Namespace) -> ConvertConfig:
         keep_failed=args.keep_failed,
         msg_path=args.msg_path,
         fail_fast=args.fail_fast,
+        formats=tuple(f.strip() for f in args.format.split(",") if f.strip()),
+        hdf5_jpeg_quality=args.hdf5_jpeg,
     )
 
 
@@ -140,6 +143,13 @@ def _convert(args: argparse.Namespace) -> int:
         config = _convert_config(args)
     except pydantic.ValidationError as err:
         raise BagportError(f"invalid options: {_option_errors(err)}") from err
+    if args.push_to_hub and (args.repo_id is None or "lerobot" not in config.formats):
+        raise BagportError(
+            "--push-to-hub publishes the LeRobot dataset under --repo-id: give --repo-id ORG/NAME and keep lerobot "
+            "in --format"
+        )
+    if args.push_to_hub:
+        hf_token()  # before converting, not after
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
     if show_bar:
@@ -152,11 +162,16 @@ def _convert(args: argparse.Namespace) -> int:
             print(file=sys.stderr)
     if not args.quiet:
         print(summary_json(report))
+    for fmt, output in report.outputs.items():
+        if output != report.root:
+            print(f"wrote {fmt} at {output}", file=sys.stderr)
     wall_s = time.perf_counter() - started
     for row in report.excluded:
         where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
         print(f"excluded bags[{row['manifest_entry']}] {where}: {row['reason']}", file=sys.stderr)
     print(_summary_line(report, args.append, wall_s), file=sys.stderr)
+    if args.push_to_hub:
+        push_from_args(report.outputs.get("lerobot", report.root), config.resolved_repo_id(), args)
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
     return 1 if any(not row.get("excluded_by_label") for row in report.excluded) else 0
 
@@ -376,6 +391,27 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="stop at the first bag that fails to convert, writing nothing (default: report it, convert the others)",
     )
+    convert.add_argument(
+        "--format",
+        default="lerobot",
+        help="outputs, comma-separated: lerobot (default), hdf5 (ALOHA/ACT layout; extra bagport[hdf5]), robodm "
+        "(Robo-DM trajectories; extra bagport[robodm]); LeRobot's goes to --output, each other one to "
+        "<output>.<format>",
+    )
+    convert.add_argument(
+        "--hdf5-jpeg",
+        type=int,
+        default=None,
+        metavar="QUALITY",
+        help="HDF5 images as JPEG of this quality (1-100), like ALOHA's compressed episodes (default: raw uint8)",
+    )
+    convert.add_argument(
+        "--push-to-hub",
+        action="store_true",
+        help="after converting, push the LeRobot dataset to the Hugging Face Hub as --repo-id (HF_TOKEN from the "
+        "environment; see `bagport push`)",
+    )
+    add_push_options(convert)
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(
         "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
@@ -413,6 +449,8 @@ def _parser() -> argparse.ArgumentParser:
     )
     repair.add_argument("output", help="dataset folder or URI (as given to convert --output)")
     repair.set_defaults(func=_cmd_repair)
+
+    add_push_command(sub)
 
     contract = sub.add_parser("contract", help="work with contracts")
     contract_sub = contract.add_subparsers(dest="contract_command", required=True)

@@ -31,6 +31,8 @@ def reduce_task(
         "wrote %d episode(s), %d frames to %s (%d converted now, %d reused from the staging store)",
         report.episodes, report.frames, report.root, report.converted, len(report.reused),
     )  # fmt: skip
+    for fmt, output in report.outputs.items():
+        logger.info("wrote %s at %s", fmt, output)
     for row in report.excluded:
         logger.warning("excluded %s: %s", row["bag_uri"], row["reason"])
     return report

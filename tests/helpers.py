@@ -6,6 +6,7 @@ from pathlib import Path
 from typing import Any
 
 from bagport.episode import EpisodeRequest, episode_id_for
+from bagport.staging import EpisodeSummary
 from tests.conftest import REALBAGS, REPO
 
 SAMPLE_CONTRACT = REPO / "configs" / "contracts" / "sample_robot.yaml"
@@ -20,6 +21,7 @@ __all__ = [
     "convert_in_process",
     "episode_request",
     "realbag",
+    "staged_episodes",
 ]
 
 
@@ -61,8 +63,7 @@ def convert_in_process(bags: str, contract_text: str, tmp_path: Path, **options:
     dataset's folder.
     ``bags`` is a glob or a manifest; ``options`` are further :class:`ConvertConfig` fields."""
     from bagport.config import ConvertConfig  # noqa: PLC0415
-    from bagport.episode import convert_episode  # noqa: PLC0415
-    from bagport.run import plan_run, reduce_run  # noqa: PLC0415
+    from bagport.run import plan_run, reduce_run, stage_all  # noqa: PLC0415
     from bagport.segment import segment_request  # noqa: PLC0415
 
     contract = tmp_path / "contract.yaml"
@@ -78,6 +79,25 @@ def convert_in_process(bags: str, contract_text: str, tmp_path: Path, **options:
     )
     plan = plan_run(config)
     episodes = [episode for request in plan.requests for episode in segment_request(request).requests]
-    staged = [convert_episode(request).dir_uri for request in episodes]
-    reduce_run(plan, staged)
+    reduce_run(plan, stage_all(plan, episodes))
     return out
+
+
+def staged_episodes(root: Path, durations_s: tuple[float, ...]) -> list[EpisodeSummary]:
+    """Episodes of the sample contract (two 32x32 cameras: raw and JPEG) staged under ``root``/staging,
+    one synthetic bag each, with :data:`FAST_CODEC`."""
+    from bagport.episode import convert_episode  # noqa: PLC0415
+    from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag  # noqa: PLC0415
+
+    cameras = (
+        CameraSpec("front", "raw", "bgr8", height=32, width=32),
+        CameraSpec("wrist", "jpeg", height=32, width=32),
+    )
+    summaries = []
+    for i, duration_s in enumerate(durations_s):
+        bag = root / f"ep{i}"
+        write_episode_bag(
+            bag, "mcap", EpisodeSpec(duration_s=duration_s, seed=i, cameras=cameras, task=f"task {i}")
+        )
+        summaries.append(convert_episode(episode_request(bag, root / "staging")))
+    return summaries

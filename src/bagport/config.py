@@ -72,6 +72,18 @@ class ConvertConfig(BaseModel):
         description="Folder of .msg files (<pkg>/msg/<Type>.msg) for types the bags do not embed; "
         "read once and sent to the workers with each episode.",
     )
+    formats: tuple[Literal["lerobot", "hdf5", "robodm"], ...] = Field(
+        default=("lerobot",),
+        description="Outputs to write from the same staged episodes: lerobot (at output), hdf5 (ALOHA/ACT "
+        "layout, one file per episode), robodm (one Robo-DM trajectory per episode); the first non-LeRobot "
+        "one goes to output when lerobot is not asked for, the others to '<output>.<format>'.",
+    )
+    hdf5_jpeg_quality: int | None = Field(
+        default=None,
+        ge=1,
+        le=100,
+        description="HDF5 images as JPEG of this quality, like ALOHA's compressed episodes; default: raw uint8.",
+    )
     fail_fast: bool = Field(
         default=False,
         description="Stop the run at the first bag that fails to convert (or fails QA under fail_run); "
@@ -93,6 +105,22 @@ class ConvertConfig(BaseModel):
                     f"add --runner {runner} (runner: {runner}), or leave the address out"
                 )
         return self
+
+    @model_validator(mode="after")
+    def _formats_usable(self) -> ConvertConfig:
+        if not self.formats or len(set(self.formats)) != len(self.formats):
+            raise ValueError(f"formats {list(self.formats)}: give each of lerobot, hdf5, robodm at most once")
+        if self.append and self.formats != ("lerobot",):
+            raise ValueError(
+                "append adds to a LeRobot dataset only: leave --format out, or convert into a new --output"
+            )
+        return self
+
+    def format_outputs(self) -> dict[str, str]:
+        """Each format's output: LeRobot's (else the first format's) at ``output``, the others beside it."""
+        primary = "lerobot" if "lerobot" in self.formats else self.formats[0]
+        base = self.output.rstrip("/")
+        return {fmt: self.output if fmt == primary else f"{base}.{fmt}" for fmt in self.formats}
 
     def manifest_text(self) -> tuple[str, str] | None:
         """``(yaml, source name)`` of the one-entry manifest a ``bags_glob`` stands for."""

@@ -163,3 +163,7 @@ class QualityError(BagportError):
 
 class ValidationError(BagportError):
     """A written dataset violates a LeRobot v3.0 invariant or does not load."""
+
+
+class PushError(BagportError):
+    """Publishing a dataset on the Hugging Face Hub failed or was refused."""

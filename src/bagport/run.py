@@ -27,6 +27,7 @@ from bagport.dataset.repair import repair_dataset
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError, QualityError
+from bagport.formats import check_format_outputs, write_formats
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
 from bagport.segment import EXCLUDED_LABELS, kept_segmentation, label_reason, segment_request, segments_bags
@@ -127,6 +128,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             f"{config.output} already exists; nothing was written. Fix: choose a new --output, or pass "
             "--overwrite to replace it (the old dataset stays until the new one is complete)."
         )
+    check_format_outputs(config)
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(
@@ -366,17 +368,27 @@ def reduce_run(
         record_exclusions(plan.config.output, record)
         excluded = tuple(e.brief() for e in entries)
         return replace(dataset_report(plan.config.output), excluded=excluded, qa=excluded)
-    report = write_dataset(
-        kept,
-        plan.config.output,
-        robot_type=plan.contract.robot_type,
-        limits=limits,
-        run_record=record,
-        overwrite=plan.config.overwrite,
-        qa=entries,
-        qa_config=plan.qa.model_dump(mode="json"),
-        append=plan.config.append,
+    formats = plan.config.formats
+    report = (
+        write_dataset(
+            kept,
+            plan.config.output,
+            robot_type=plan.contract.robot_type,
+            limits=limits,
+            run_record=record,
+            overwrite=plan.config.overwrite,
+            qa=entries,
+            qa_config=plan.qa.model_dump(mode="json"),
+            append=plan.config.append,
+        )
+        if "lerobot" in formats
+        else None
     )
+    # the same kept episodes, from the same staging, into every other format (no second read of the bags)
+    others = write_formats(
+        kept, plan.config, robot_type=plan.contract.robot_type, run_record=record, qa=entries
+    )
+    report = replace(report or others[formats[0]], outputs=plan.config.format_outputs())
     if not plan.config.keep_staging:
         _remove_staged(plan, [e.dir_uri for e in staged])
     reused = tuple(_episode_name(e.bag_uri, e.segment) for e in staged if e.reused)
@@ -412,6 +424,7 @@ def summary_json(report: DatasetReport) -> str:
             "excluded": list(report.excluded),
             "converted_now": report.converted,
             "reused": len(report.reused),
+            "outputs": report.outputs,
         },
         indent=2,
     )

@@ -11,9 +11,8 @@ import pytest
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
 from bagport.errors import DatasetWriteError, QualityError
-from bagport.run import EpisodeFailure, plan_run, reduce_run, stage_all
+from bagport.run import EpisodeFailure, PlannedEpisode, plan_run, reduce_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -34,7 +33,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def _run(fleet: Path, out: Path, **options: object) -> tuple[ConvertConfig, list[str]]:
+def _run(fleet: Path, out: Path, **options: object) -> tuple[ConvertConfig, list[PlannedEpisode]]:
     config = ConvertConfig(
         manifest=str(fleet / "manifest.yaml"),
         contract=str(SAMPLE_CONTRACT),
@@ -122,7 +121,7 @@ def test_a_broken_bag_arriving_alone_is_recorded_excluded_and_not_retried(tmp_pa
     options = {"bags_glob": str(bags / "*"), "contract": str(SAMPLE_CONTRACT), "output": str(out)}
     config = ConvertConfig(**options, encoder=FAST_CODEC, append=True)  # type: ignore[arg-type]
     plan = plan_run(config)
-    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    reduce_run(plan, stage_all(plan))
     (bags / "broken.mcap").write_bytes(b"not a bag at all")
     plan = plan_run(config)
     assert [Path(r.bag_uri).name for r in plan.requests] == ["broken.mcap"]
@@ -148,7 +147,7 @@ def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Pa
         append=True,
     )
     plan = plan_run(config)
-    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    reduce_run(plan, stage_all(plan))
     write_episode_bag(bags / "second", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
     text = SAMPLE_CONTRACT.read_text()
     start = text.index("  - key: observation.images.wrist")

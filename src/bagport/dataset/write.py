@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import shutil
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -51,6 +51,8 @@ class DatasetReport:
     """Episodes this run converted (or tried to); the others came from the staging store as they were."""
     reused: tuple[str, ...] = ()
     """Episodes taken from the staging store without converting them again (bag URI, ``#<n>`` for a split bag)."""
+    outputs: dict[str, str] = field(default_factory=dict)
+    """Every format the run wrote (``--format``): format -> its output (:mod:`bagport.formats`)."""
 
 
 def _check_consistent(summaries: Sequence[EpisodeSummary]) -> tuple[StagedFeature, ...]:

@@ -11,10 +11,9 @@ import pandas as pd
 import pytest
 
 from bagport.config import ConvertConfig
-from bagport.episode import convert_episode
 from bagport.qa import QAConfig
 from bagport.qa.jumps import step_outlier_checks
-from bagport.run import plan_run, reduce_run
+from bagport.run import plan_run, reduce_run, stage_all
 from bagport.stats import VectorSketch
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
@@ -63,7 +62,7 @@ def test_a_one_radian_spike_warns_by_default_in_a_converted_fleet(tmp_path: Path
         manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output=str(out), encoder=FAST_CODEC
     )
     plan = plan_run(config)
-    reduce_run(plan, [convert_episode(r).dir_uri for r in plan.requests])
+    reduce_run(plan, stage_all(plan))
     episodes = json.loads((out / "meta/qa/summary.json").read_text())["episodes"]
     verdicts = [e["verdict"] for e in episodes]
     assert verdicts == ["pass", "pass", "pass", "warn", "pass"], [e["reason"] for e in episodes]

@@ -1,0 +1,65 @@
+"""Outputs other than LeRobot, written from the same staged episodes (no second read of the bags).
+
+``--format lerobot,hdf5,robodm``: the LeRobot dataset (or, without ``lerobot``, the first format
+listed) goes to ``--output``, every other format to ``<output>.<format>`` (see
+:meth:`bagport.config.ConvertConfig.format_outputs`). Each writer publishes as the LeRobot writer
+does (:mod:`bagport.formats.publish`) and writes ``meta/info.json`` and ``meta/provenance/``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+from bagport.config import ConvertConfig
+from bagport.dataset import DatasetReport
+from bagport.formats.publish import check_output_free
+from bagport.qa import QAEntry
+from bagport.staging import EpisodeSummary
+
+__all__ = ["check_format_outputs", "write_formats"]
+
+
+def check_format_outputs(config: ConvertConfig) -> None:
+    """Before any work: every output but the LeRobot one is free (or ``overwrite``), a crashed
+    write into it undone."""
+    for fmt, output in config.format_outputs().items():
+        if fmt != "lerobot" and output != config.output:
+            check_output_free(output, overwrite=config.overwrite)
+
+
+def write_formats(
+    summaries: Sequence[EpisodeSummary],
+    config: ConvertConfig,
+    *,
+    robot_type: str,
+    run_record: dict[str, Any],
+    qa: Sequence[QAEntry],
+) -> dict[str, DatasetReport]:
+    """Write every format but LeRobot that ``config`` asks for; their reports by format."""
+    reports: dict[str, DatasetReport] = {}
+    for fmt, output in config.format_outputs().items():
+        if fmt == "hdf5":
+            from bagport.formats.hdf5 import write_hdf5_dataset  # noqa: PLC0415 - needs the hdf5 extra
+
+            reports[fmt] = write_hdf5_dataset(
+                summaries,
+                output,
+                robot_type=robot_type,
+                run_record=run_record,
+                overwrite=config.overwrite,
+                qa=qa,
+                jpeg_quality=config.hdf5_jpeg_quality,
+            )
+        elif fmt == "robodm":
+            from bagport.formats.robodm import write_robodm_dataset  # noqa: PLC0415 - needs the robodm extra
+
+            reports[fmt] = write_robodm_dataset(
+                summaries,
+                output,
+                robot_type=robot_type,
+                run_record=run_record,
+                overwrite=config.overwrite,
+                qa=qa,
+            )
+    return reports

@@ -1,4 +1,4 @@
-.PHONY: setup demo test lint bench
+.PHONY: setup demo test lint bench docs
 
 setup:
 	@bash scripts/setup.sh
@@ -11,3 +11,6 @@ test: setup
 
 bench: setup
 	@bash -c 'source scripts/env.sh && .venv/bin/python bench/run.py $(BENCH_ARGS)'
+
+docs: setup
+	@bash -c 'source scripts/env.sh && .venv/bin/python -m flows.cli_reference docs/cli.md && .venv/bin/mkdocs build --strict'

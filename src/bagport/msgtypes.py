@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["IMAGE_TYPES", "TF_TYPES", "RosType"]
+__all__ = ["IMAGE_TYPES", "TF_TYPES", "RosType", "normalize_msgtype"]
 
 
 class RosType(StrEnum):
@@ -30,3 +30,11 @@ class RosType(StrEnum):
 IMAGE_TYPES = frozenset({RosType.IMAGE.value, RosType.COMPRESSED_IMAGE.value})
 TF_TYPES = frozenset({RosType.TF_MESSAGE.value, RosType.TF_MESSAGE_ROS1.value})
 """/tf messages: tf2's, and ROS 1 tf's older ``tf/tfMessage`` (the same fields)."""
+
+
+def normalize_msgtype(msgtype: str) -> str:
+    """``sensor_msgs/Image`` (ROS 1 style) -> ``sensor_msgs/msg/Image``."""
+    parts = msgtype.strip().split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return msgtype.strip()

@@ -22,6 +22,8 @@ from pydantic import (
     StrictInt,
 )
 
+from bagport.msgtypes import normalize_msgtype
+
 __all__ = [
     "ActionEntry",
     "AlignOptions",
@@ -39,14 +41,6 @@ __all__ = [
 ]
 
 _MSGTYPE = re.compile(r"^[A-Za-z][\w]*/(msg/)?[A-Za-z][\w]*$")
-
-
-def normalize_msgtype(msgtype: str) -> str:
-    """``sensor_msgs/Image`` (ROS 1 style) -> ``sensor_msgs/msg/Image``."""
-    parts = msgtype.strip().split("/")
-    if len(parts) == 2:
-        return f"{parts[0]}/msg/{parts[1]}"
-    return msgtype.strip()
 
 
 def _check_key(key: str) -> str:

@@ -22,12 +22,12 @@ from bagport.episode.cameras import CameraSink
 from bagport.episode.checks import bag_fingerprint, scan_episode
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, safety_check, task_check
-from bagport.episode.request import EpisodeRequest
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.tasks import resolve_tasks
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
+from bagport.request import EpisodeRequest
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,

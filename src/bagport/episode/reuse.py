@@ -25,8 +25,8 @@ from fsspec.core import url_to_fs
 from bagport import __version__
 from bagport.contract import FeatureKind
 from bagport.episode.assemble import AlignedSource
-from bagport.episode.request import EpisodeRequest, msg_definitions_sha256
 from bagport.qa import CheckResult
+from bagport.request import EpisodeRequest, msg_definitions_sha256
 from bagport.staging import (
     EPISODE_SUMMARY,
     QA_FILE,

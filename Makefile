@@ -1,4 +1,4 @@
-.PHONY: setup demo test lint bench stack stack-down stack-status
+.PHONY: setup demo test lint bench docs stack stack-down stack-status
 
 setup:
 	@bash scripts/setup.sh
@@ -21,3 +21,6 @@ stack-down:
 
 stack-status:
 	@bash scripts/stack.sh status
+
+docs: setup
+	@bash -c 'source scripts/env.sh && .venv/bin/python -m flows.cli_reference docs/cli.md && .venv/bin/mkdocs build --strict'

@@ -6,3 +6,4 @@ export PREFECT_LOGGING_LEVEL="${PREFECT_LOGGING_LEVEL:-WARNING}"
 export HF_HOME="${HF_HOME:-$PWD/.prefect/hf}"
 export HF_HUB_OFFLINE=1
 export SVT_LOG="${SVT_LOG:-1}"
+export NO_MKDOCS_2_WARNING=1

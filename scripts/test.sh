@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The whole test suite: lint (ruff), types (mypy strict), then pytest (slow end-to-end tests included).
+# The whole test suite: lint (ruff), types (mypy strict), import layers (import-linter), the docs site
+# (mkdocs --strict: a broken link fails), then pytest (slow end-to-end tests included).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source scripts/env.sh
@@ -8,4 +9,6 @@ bash scripts/setup_stack.sh  # PostgreSQL for the native stack test (tests/stack
 .venv/bin/ruff check src tasks flows tests bench
 .venv/bin/ruff format --check src tasks flows tests bench
 .venv/bin/mypy src/bagport tasks flows tests bench
+.venv/bin/lint-imports --no-cache
+.venv/bin/mkdocs build --strict --quiet
 .venv/bin/pytest "$@"

@@ -21,6 +21,7 @@ from importlib.metadata import entry_points
 from typing import Any
 
 from bagport.errors import ContractError
+from bagport.msgtypes import normalize_msgtype
 
 __all__ = [
     "ENTRY_POINT_GROUP",
@@ -87,7 +88,6 @@ def register_decoder(msgtype: str) -> Callable[[CustomDecoder], CustomDecoder]:
 
     ``msgtype`` may be ROS 1 style (``pkg/Type``).  Registering a second function for a type replaces
     the first."""
-    from bagport.contract.model import normalize_msgtype  # noqa: PLC0415 - contract imports decode
 
     def decorate(func: CustomDecoder) -> CustomDecoder:
         ref = f"{getattr(func, '__module__', '?')}:{getattr(func, '__qualname__', func)}"

@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from bagport.contract.plan import SourceSpec
 from bagport.decode.custom import CustomDecoder, registered_decoder, resolve_decoder
 from bagport.decode.defaults import DEFAULT_FIELDS
 from bagport.decode.joints import joint_state_extractor, joint_trajectory_extractor, multi_dof_extractor
@@ -15,7 +14,29 @@ from bagport.decode.tf import tf_extractor
 from bagport.errors import DecodeError
 from bagport.msgtypes import TF_TYPES, RosType
 
-__all__ = ["VectorExtractor", "make_extractor"]
+__all__ = ["ExtractorSource", "VectorExtractor", "make_extractor"]
+
+
+class ExtractorSource(Protocol):
+    """What an extractor needs of a contract entry (:class:`bagport.contract.SourceSpec` is one).
+
+    A protocol, so this layer does not import the contract layer above it."""
+
+    @property
+    def key(self) -> str: ...
+    @property
+    def topic(self) -> str: ...
+    @property
+    def msgtype(self) -> str: ...
+    @property
+    def names(self) -> tuple[str, ...]: ...
+    @property
+    def decoder(self) -> str | None: ...
+    @property
+    def child_frame(self) -> str | None: ...
+    @property
+    def parent_frame(self) -> str | None: ...
+
 
 _SCALAR_TYPES = frozenset({RosType.FLOAT32, RosType.FLOAT64, RosType.INT32, RosType.INT64, RosType.BOOL})
 _ARRAY_TYPES = frozenset(
@@ -23,7 +44,7 @@ _ARRAY_TYPES = frozenset(
 )
 
 
-def _arrays_extractor(src: SourceSpec, first_msg: Any, fields: tuple[str, ...]) -> VectorExtractor:
+def _arrays_extractor(src: ExtractorSource, first_msg: Any, fields: tuple[str, ...]) -> VectorExtractor:
     """Whole array fields, their lengths fixed by the first message."""
     widths = {name: len(getattr(first_msg, name)) for name in fields}
 
@@ -44,7 +65,7 @@ def _arrays_extractor(src: SourceSpec, first_msg: Any, fields: tuple[str, ...]) 
     return VectorExtractor(names, extract)
 
 
-def _custom_extractor(src: SourceSpec, decoder: CustomDecoder, first_msg: Any) -> VectorExtractor:
+def _custom_extractor(src: ExtractorSource, decoder: CustomDecoder, first_msg: Any) -> VectorExtractor:
     def extract_custom(msg: Any) -> Vector:
         try:
             values = np.atleast_1d(np.asarray(decoder(msg, src), dtype=np.float64))
@@ -70,7 +91,7 @@ def _custom_extractor(src: SourceSpec, decoder: CustomDecoder, first_msg: Any) -
     return VectorExtractor(names, extract_custom)
 
 
-def make_extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
+def make_extractor(src: ExtractorSource, first_msg: Any) -> VectorExtractor:
     """Build the extractor for ``src``; the first message fixes unnamed dimensions.
 
     Precedence: the entry's ``decoder``, a decoder registered for the type, then the built-in ones.
@@ -87,7 +108,7 @@ def make_extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
     return extractor
 
 
-def _extractor(src: SourceSpec, first_msg: Any) -> VectorExtractor:
+def _extractor(src: ExtractorSource, first_msg: Any) -> VectorExtractor:
     if src.decoder is not None:
         decoder = resolve_decoder(src.decoder, field=f"{src.key} on {src.topic}")
         return _custom_extractor(src, decoder, first_msg)

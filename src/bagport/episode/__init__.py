@@ -3,6 +3,6 @@
 from __future__ import annotations
 
 from bagport.episode.convert import convert_episode
-from bagport.episode.request import EpisodeRequest, episode_id_for
+from bagport.request import EpisodeRequest, episode_id_for
 
 __all__ = ["EpisodeRequest", "convert_episode", "episode_id_for"]

@@ -6,9 +6,9 @@ import hashlib
 
 from bagport.bags import BagInfo, BagReader, BagWindow
 from bagport.contract import ContractPlan, normalize_msgtype
-from bagport.episode.request import EpisodeRequest
 from bagport.episode.timeline import Timeline, scan_plan_timeline
 from bagport.errors import AlignmentError, ContractError
+from bagport.request import EpisodeRequest
 
 __all__ = ["bag_fingerprint", "check_bag_fits", "check_window_has_data", "scan_episode"]
 

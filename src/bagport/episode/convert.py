@@ -21,7 +21,6 @@ from bagport.episode.cameras import CameraSink
 from bagport.episode.checks import bag_fingerprint, scan_episode
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.quality import assess_episode, integrity_check, safety_check, task_check
-from bagport.episode.request import EpisodeRequest
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import FrameTableWriter, write_provenance
 from bagport.episode.staged import PlannedEpisode, matches
@@ -29,6 +28,7 @@ from bagport.episode.tasks import resolve_tasks
 from bagport.episode.video import skipped_packet_checks
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
+from bagport.request import EpisodeRequest
 from bagport.scratch import scratch_dir
 from bagport.staging import (
     EPISODE_SUMMARY,

@@ -28,8 +28,8 @@ from bagport import __version__
 from bagport.contract import FeatureKind
 from bagport.decode.video import decoder_settings
 from bagport.episode.assemble import AlignedSource
-from bagport.episode.request import EpisodeRequest, msg_definitions_sha256
 from bagport.qa import CheckResult
+from bagport.request import EpisodeRequest, msg_definitions_sha256
 from bagport.staging import (
     EPISODE_SUMMARY,
     QA_FILE,

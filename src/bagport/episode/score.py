@@ -20,11 +20,11 @@ from bagport.episode.alignment import align_sources
 from bagport.episode.assemble import Frame, assemble_frames
 from bagport.episode.checks import scan_episode
 from bagport.episode.quality import assess_episode, integrity_check, safety_check, task_check
-from bagport.episode.request import EpisodeRequest
 from bagport.episode.tasks import resolve_tasks
 from bagport.errors import BagportError, ManifestError
 from bagport.manifest import load_manifest
 from bagport.qa import EpisodeQA, QAConfig, QAEntry, ValueMonitor, load_qa_config
+from bagport.request import EpisodeRequest
 from bagport.segment import EXCLUDED_LABELS, label_reason, segment_request, segments_bags
 from bagport.uris import read_text
 

@@ -22,8 +22,8 @@ from typing import Any
 from fsspec.core import url_to_fs
 
 from bagport import __version__
-from bagport.episode.request import EpisodeRequest
 from bagport.errors import DatasetWriteError
+from bagport.request import EpisodeRequest
 from bagport.staging import EPISODE_SUMMARY, EpisodeSummary, episode_dir, staged_path
 
 __all__ = ["PlannedEpisode", "StagedSplit", "list_staged", "matches", "split_staged"]

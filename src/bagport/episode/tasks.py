@@ -7,9 +7,9 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import numpy.typing as npt
 
-from bagport.episode.request import EpisodeRequest
 from bagport.episode.timeline import TaskMessage
 from bagport.errors import ManifestError
+from bagport.request import EpisodeRequest
 
 __all__ = ["OPERATOR_PROMPT_KEY", "resolve_tasks"]
 

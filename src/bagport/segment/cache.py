@@ -21,7 +21,7 @@ import fsspec
 
 from bagport import __version__
 from bagport.contract.model import EpisodesOptions
-from bagport.episode.request import EpisodeRequest, msg_definitions_sha256
+from bagport.request import EpisodeRequest, msg_definitions_sha256
 from bagport.segment.windows import EpisodeWindow, Segmentation
 from bagport.staging import staged_path, write_json
 

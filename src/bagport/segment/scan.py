@@ -11,8 +11,8 @@ from bagport.bags import BagReader, open_bag, source_stamp
 from bagport.contract import ContractPlan, parse_contract
 from bagport.contract.model import EpisodesOptions
 from bagport.decode import field_at
-from bagport.episode.request import EpisodeRequest
 from bagport.errors import DecodeError
+from bagport.request import EpisodeRequest
 from bagport.segment.cache import read_segmentation, segmentation_uri, write_segmentation
 from bagport.segment.events import event_from_message
 from bagport.segment.windows import (

@@ -1,4 +1,7 @@
-"""What a worker needs to convert one bag: small, serialisable, no live objects."""
+"""What a worker needs to convert one episode: small, serialisable, no live objects.
+
+A neutral module: the plan (`bagport.run`), segmentation (`bagport.segment`), conversion
+(`bagport.episode`) and the flows all pass `EpisodeRequest`s, so it sits below all of them."""
 
 from __future__ import annotations
 

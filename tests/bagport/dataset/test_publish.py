@@ -99,3 +99,24 @@ def test_without_an_atomic_exchange_two_renames_do_the_same(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
     assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
     assert validate_dataset(out, decode_every=1000).episodes == 2
+
+
+def test_an_append_that_fails_while_moving_its_files_in_takes_them_out_again(
+    staged: list[EpisodeSummary], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "ds"
+    write_dataset(staged[:1], str(out), robot_type="r")
+    before = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def disk_full(step: str) -> None:
+        if step == "local.append.moving":
+            raise OSError(28, "No space left on device")
+
+    set_hook(disk_full)
+    try:
+        with pytest.raises(OSError, match="No space left"):
+            write_dataset(staged[1:], str(out), robot_type="r", append=True)
+    finally:
+        set_hook(None)
+    assert {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]

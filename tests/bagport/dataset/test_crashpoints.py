@@ -209,3 +209,18 @@ def test_an_s3_kill_after_each_step_leaves_readers_a_whole_version_and_recovers(
     _rerun(staged, scenario, output, exists)
     assert _s3_tree(s3, key) == references[scenario]  # nothing staged or journaled is left
     assert list(scratch.iterdir()) == []
+
+
+def test_every_step_the_code_marks_is_named_and_swept() -> None:
+    import re  # noqa: PLC0415
+
+    from tests.helpers import REPO  # noqa: PLC0415
+
+    marked = {
+        step
+        for path in (REPO / "src/bagport/dataset").glob("*.py")
+        for step in re.findall(r'reached\("([^"]+)"\)', path.read_text())
+    }
+    assert marked == {step for steps in STEPS.values() for step in steps}
+    with pytest.raises(ValueError, match=r"unknown commit step 'local\.publish\.typo'"):
+        kill_after("local.publish.typo")

@@ -3,7 +3,7 @@
 Every step that changes what is on disk (or in the object store) calls :func:`reached` with its
 name (``local.publish.swapped``, ``s3.committing``...: :data:`STEPS` lists them all). Nothing
 happens unless a hook is installed with :func:`set_hook`. The crash-point sweep
-(``tests/bagport/dataset/test_crash_sweep.py``) installs :func:`kill_after`, which makes the
+(``tests/bagport/dataset/test_crashpoints.py``) installs :func:`kill_after`, which makes the
 process SIGKILL itself right after the chosen step; the CLI installs it when the environment
 variable ``BAGPORT_CRASH_AT`` names a step (the library itself reads no environment).
 """

@@ -26,6 +26,7 @@ from typing import Any, Literal
 from fsspec import AbstractFileSystem
 
 from bagport.dataset.layout import JOURNAL_PATH
+from bagport.uris import is_local
 
 __all__ = ["Journal", "file_sha256", "read_journal", "remove_journal", "write_journal"]
 
@@ -67,7 +68,7 @@ class Journal:
 def write_journal(fs: AbstractFileSystem, root: str, journal: Journal) -> None:
     """Write (or replace, in one request/rename) the record of the dataset at ``root``."""
     path = f"{root}/{JOURNAL_PATH}"
-    if isinstance(fs.protocol, str | tuple) and "file" in fs.protocol:
+    if is_local(fs):
         tmp = Path(f"{path}.tmp")
         tmp.write_text(journal.to_json())
         tmp.replace(path)  # atomic: the record is either the old or the new one

@@ -135,6 +135,12 @@ def _recover_append(final: Path, journal: Journal) -> list[str]:
     if info.is_file() and file_sha256(info) == journal.info_sha256:
         remove_journal(LocalFileSystem(), str(final))
         return [f"finished an append into {final} that was committed (its new meta/ was in place)"]
+    removed = _undo_append(final, journal)
+    return [f"rolled back an append into {final} that was not committed: removed {removed} new file(s)"]
+
+
+def _undo_append(final: Path, journal: Journal) -> int:
+    """Remove the files an uncommitted append moved in, then its record; how many were removed."""
     removed = 0
     for rel in journal.files:  # new names by construction: present only because this append moved them
         target = final / rel
@@ -143,7 +149,7 @@ def _recover_append(final: Path, journal: Journal) -> list[str]:
             removed += 1
             _prune_empty(target.parent, final)
     remove_journal(LocalFileSystem(), str(final))
-    return [f"rolled back an append into {final} that was not committed: removed {removed} new file(s)"]
+    return removed
 
 
 def recover_local(final: Path) -> list[str]:
@@ -239,12 +245,16 @@ def commit_append(build: Path, final: Path, added: Sequence[str]) -> None:
     journal = Journal("append", build.name, tuple(added), info_sha256=file_sha256(build / INFO_PATH))
     write_journal(LocalFileSystem(), str(final), journal)
     reached("local.append.journaled")
-    for n, rel in enumerate(added):
-        _move_in(build / rel, final / rel)
-        if n == 0:
-            reached("local.append.moving")
-    reached("local.append.moved")
-    _replace(build / "meta", final / "meta", f".meta.old-{uuid.uuid4().hex[:8]}")
+    try:
+        for n, rel in enumerate(added):
+            _move_in(build / rel, final / rel)
+            if n == 0:
+                reached("local.append.moving")
+        reached("local.append.moved")
+        _replace(build / "meta", final / "meta", f".meta.old-{uuid.uuid4().hex[:8]}")
+    except Exception:
+        _undo_append(final, journal)  # what a failure (not a kill) moved in goes at once
+        raise
     reached("local.append.committed")
     shutil.rmtree(build / "meta", ignore_errors=True)
     reached("local.append.cleaned")

@@ -24,7 +24,7 @@ changed: existing data and video files are never rewritten.
 
 from __future__ import annotations
 
-import hashlib
+import json
 import uuid
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -40,6 +40,8 @@ from bagport.dataset.meta import DatasetLimits
 from bagport.errors import DatasetWriteError
 
 __all__ = ["append_remote", "publish_remote", "recover_remote"]
+
+_LEGACY_JOURNAL = ".append-journal.json"
 
 
 def _roll_forward(fs: AbstractFileSystem, root: str, journal: Journal) -> None:
@@ -66,11 +68,35 @@ def _roll_forward(fs: AbstractFileSystem, root: str, journal: Journal) -> None:
     remove_journal(fs, root)
 
 
+def _recover_legacy(fs: AbstractFileSystem, root: str) -> list[str]:
+    """Roll back a publish of bagport before the intent record (its ``.append-journal.json`` and
+    server-side backups of what it rewrote or removed)."""
+    path = f"{root}/{_LEGACY_JOURNAL}"
+    if not fs.exists(path):
+        return []
+    with fs.open(path, "r", encoding="utf-8") as handle:
+        legacy = json.load(handle)
+    for rel in legacy["added"]:
+        if fs.exists(f"{root}/{rel}"):
+            fs.rm(f"{root}/{rel}")
+    backup = f"{root}/{legacy['backup']}"
+    for rel in [*legacy["rewritten"], *legacy["removed"]]:
+        if fs.exists(f"{backup}/{rel}"):
+            fs.copy(f"{backup}/{rel}", f"{root}/{rel}")
+    if fs.exists(backup):
+        fs.rm(backup, recursive=True)
+    fs.rm(path)
+    return [f"rolled back a publish into {root} left by an older bagport (its {_LEGACY_JOURNAL})"]
+
+
 def recover_remote(output: str) -> list[str]:
     """Finish or undo a publish to ``output`` that did not complete; what was done (empty: nothing)."""
     fs, root = url_to_fs(output)
     root = root.rstrip("/")
     fs.invalidate_cache()
+    legacy = _recover_legacy(fs, root)
+    if legacy:
+        return legacy
     journal = read_journal(fs, root)
     if journal is None:
         return []
@@ -111,10 +137,6 @@ def publish_remote(
     _roll_forward(fs, root, journal)
 
 
-def _sha256(path: Path) -> str:
-    return hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def _files(folder: Path, under: str) -> list[str]:
     top = folder / under
     return (
@@ -132,7 +154,7 @@ def _download_meta(fs: AbstractFileSystem, root: str, local: Path) -> dict[str, 
         target = local / rel
         target.parent.mkdir(parents=True, exist_ok=True)
         fs.get_file(remote, str(target))
-        digests[rel] = _sha256(target)
+        digests[rel] = file_sha256(target)
     return digests
 
 
@@ -155,7 +177,7 @@ def append_remote[Report](
                 f"{output}/{rel} exists already: the dataset changed during the append; nothing was written. "
                 "Fix: run the append again (one append at a time per dataset)."
             )
-    changed = [rel for rel in _files(local, "meta") if before.get(rel) != _sha256(local / rel)]
+    changed = [rel for rel in _files(local, "meta") if before.get(rel) != file_sha256(local / rel)]
     publish_remote(local, output, added + changed, append=True)
     return report
 

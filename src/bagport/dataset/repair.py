@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+import pandas as pd
+import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport.dataset.layout import INFO_PATH, JOURNAL_PATH
@@ -28,11 +30,46 @@ class RepairReport:
     """What was done, one sentence each (empty: the dataset was consistent)."""
 
 
+def _unreferenced_tail(root: Path) -> list[Path]:
+    """Data and video files after the last ones ``meta/episodes`` refers to: what an append of a bagport
+    without the intent record moved in before it was killed (LeRobot would read their rows)."""
+    if not (root / INFO_PATH).is_file() or not (root / "meta/episodes").is_dir():
+        return []
+    files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
+    if not files:
+        return []
+    where = [c for c in pq.read_schema(files[0]).names if c.endswith(("/chunk_index", "/file_index"))]
+    episodes = pd.concat([pq.read_table(p, columns=where).to_pandas() for p in files])
+    tails = []
+    for column in [c[: -len("/chunk_index")] for c in episodes.columns if c.endswith("/chunk_index")]:
+        if column == "meta/episodes":
+            continue
+        last = max(zip(episodes[f"{column}/chunk_index"], episodes[f"{column}/file_index"], strict=True))
+        folder = root / column
+        for path in sorted(folder.glob("chunk-*/file-*.*")):
+            chunk, file = (int(part.split("-")[1].split(".")[0]) for part in path.parts[-2:])
+            if (chunk, file) > last:
+                tails.append(path)
+    return tails
+
+
+def _remove_unreferenced(root: Path) -> list[str]:
+    tails = _unreferenced_tail(root)
+    for path in tails:
+        path.unlink()
+    return [
+        f"removed {p.relative_to(root)}, moved in by an append that was killed before its meta/"
+        for p in tails
+    ]
+
+
 def repair_dataset(output: str, *, clean_scratch: bool = False) -> RepairReport:
     """Finish or undo whatever write into ``output`` a crash interrupted; with ``clean_scratch``, also
     remove the temporary folders of dead bagport processes."""
     fs, path = url_to_fs(output)
     actions = recover_local(Path(path)) if is_local(fs) else recover_remote(output)
+    if is_local(fs):
+        actions += _remove_unreferenced(Path(path))
     if clean_scratch:
         actions += [f"removed {p}, a temporary folder of a dead run" for p in clean_dead_scratch()]
     return RepairReport(output, tuple(actions))

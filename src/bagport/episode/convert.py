@@ -29,7 +29,7 @@ from bagport.episode.video import skipped_packet_checks
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.request import EpisodeRequest
-from bagport.scratch import scratch_dir
+from bagport.scratch import clean_dead_scratch, scratch_dir
 from bagport.staging import (
     EPISODE_SUMMARY,
     FRAMES_FILE,
@@ -112,6 +112,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     reusable = _reusable(request, stamp)
     if reusable is not None:
         return reusable
+    clean_dead_scratch()  # a worker on another host cleans after its own killed predecessors
     with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as whole:
         info = whole.info
         reader, timeline, window = scan_episode(whole, plan, request)

@@ -149,3 +149,23 @@ def test_append_to_a_dataset_without_label_columns_keeps_one_episodes_schema(
     assert _convert(bags, ["a", "b"], out, append=True) == 1
     assert "label" not in pq.read_schema(out / "meta/episodes/chunk-000/file-001.parquet").names
     assert validate_dataset(out, repo_id="test/append", decode_every=10).episodes == 2
+
+
+def test_files_an_older_bagport_moved_in_before_it_was_killed_are_removed_before_appending(
+    bags: Path, tmp_path: Path
+) -> None:
+    from bagport.dataset.repair import repair_dataset  # noqa: PLC0415
+
+    out = tmp_path / "ds"
+    _convert(bags, ["a"], out, append=True)
+    # an append killed after moving its files in, before its meta/ (bagport before the intent record)
+    orphans = ["data/chunk-000/file-001.parquet", "videos/observation.images.front/chunk-000/file-001.mp4"]
+    for rel in orphans:
+        shutil.copy(out / rel.replace("file-001", "file-000"), out / rel)
+    assert list(repair_dataset(str(out)).actions) == [
+        f"removed {rel}, moved in by an append that was killed before its meta/" for rel in orphans
+    ]
+    assert _convert(bags, ["a", "b"], out, append=True) == 1
+    report = validate_dataset(out, repo_id="test/append", decode_every=10)
+    assert report.episodes == 2
+    shutil.rmtree(out.with_name("ds.staging"), ignore_errors=True)

@@ -195,6 +195,8 @@ def test_an_s3_kill_after_each_step_leaves_readers_a_whole_version_and_recovers(
 
     after_kill = _s3_tree(s3, key)
     seen = {rel: digest for rel, digest in after_kill.items() if not rel.startswith(".bagport-")}
+    if STEPS["s3"].index(step) < STEPS["s3"].index("s3.committing"):  # a kill while uploading (finding 4):
+        assert seen == ({} if scenario == "first" else references["old"])  # readers keep the old version
     if "meta/info.json" in seen:  # a reader finds a dataset: the old or the new one, byte for byte
         assert seen in (references["old"], references[scenario]), sorted(seen)
     else:  # no dataset (LeRobot refuses to load), and the record says why
@@ -207,3 +209,18 @@ def test_an_s3_kill_after_each_step_leaves_readers_a_whole_version_and_recovers(
     _rerun(staged, scenario, output, exists)
     assert _s3_tree(s3, key) == references[scenario]  # nothing staged or journaled is left
     assert list(scratch.iterdir()) == []
+
+
+def test_every_step_the_code_marks_is_named_and_swept() -> None:
+    import re  # noqa: PLC0415
+
+    from tests.helpers import REPO  # noqa: PLC0415
+
+    marked = {
+        step
+        for path in (REPO / "src/bagport/dataset").glob("*.py")
+        for step in re.findall(r'reached\("([^"]+)"\)', path.read_text())
+    }
+    assert marked == {step for steps in STEPS.values() for step in steps}
+    with pytest.raises(ValueError, match=r"unknown commit step 'local\.publish\.typo'"):
+        kill_after("local.publish.typo")

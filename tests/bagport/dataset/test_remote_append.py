@@ -150,3 +150,23 @@ def test_a_crash_while_overwriting_on_s3_rolls_back_and_a_new_write_replaces_sta
     local = tmp_path / "downloaded"
     s3.get("fleet/overwritten", str(local), recursive=True)
     assert validate_dataset(local, repo_id="test/s3-overwrite").episodes == 1
+
+
+def test_a_crashed_publish_of_an_older_bagport_is_rolled_back(
+    bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path
+) -> None:
+    _append(bags, ["a"], "s3://fleet/legacy", tmp_path / "staging")
+    previous = _etags(s3, "fleet/legacy")
+    # what the journal of bagport before the intent record left: an added file, a rewritten info.json
+    s3.copy("fleet/legacy/meta/info.json", "fleet/legacy/.append-backup-0a1b2c3d/meta/info.json")
+    s3.pipe_file("fleet/legacy/meta/info.json", b"{}")
+    s3.pipe_file("fleet/legacy/data/chunk-000/file-001.parquet", b"half")
+    s3.pipe_file(
+        "fleet/legacy/.append-journal.json",
+        b'{"backup": ".append-backup-0a1b2c3d", "added": ["data/chunk-000/file-001.parquet"], '
+        b'"rewritten": ["meta/info.json"], "removed": []}',
+    )
+    assert recover_remote("s3://fleet/legacy") == [
+        "rolled back a publish into fleet/legacy left by an older bagport (its .append-journal.json)"
+    ]
+    assert _etags(s3, "fleet/legacy") == previous

@@ -1,0 +1,122 @@
+"""Local publish: --overwrite never leaves a moment without a dataset (renameat2 exchange), and the
+fallback of two renames (no exchange on this system) still recovers."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+import bagport.dataset.publish
+from bagport.dataset import write_dataset
+from bagport.dataset.crashpoints import set_hook
+from bagport.dataset.publish import exchange
+from bagport.dataset.validate import validate_dataset
+from bagport.episode import convert_episode
+from bagport.staging import EpisodeSummary
+from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from tests.helpers import episode_request
+
+CAMERAS = (
+    CameraSpec("front", "raw", "bgr8", height=32, width=48),
+    CameraSpec("wrist", "jpeg", height=32, width=48),
+)
+
+
+@pytest.fixture(scope="module")
+def staged(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeSummary]:
+    root = tmp_path_factory.mktemp("bags")
+    summaries = []
+    for i, name in enumerate(("a", "b")):
+        write_episode_bag(
+            root / name, "mcap", EpisodeSpec(duration_s=0.4, seed=i, cameras=CAMERAS, task=name)
+        )
+        summaries.append(convert_episode(episode_request(root / name, root / "staging")))
+    return summaries
+
+
+def test_exchange_swaps_two_folders_atomically(tmp_path: Path) -> None:
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a/which").write_text("a")
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b/which").write_text("b")
+    if not exchange(tmp_path / "a", tmp_path / "b"):
+        pytest.skip("this file system has no renameat2(RENAME_EXCHANGE); the fallback is tested below")
+    assert ((tmp_path / "a/which").read_text(), (tmp_path / "b/which").read_text()) == ("b", "a")
+
+
+def test_a_reader_polling_during_slow_overwrites_never_finds_the_dataset_missing_or_mixed(
+    staged: list[EpisodeSummary], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "ds"
+    write_dataset(staged[:1], str(out), robot_type="r")
+    seen: list[object] = []
+    stop = threading.Event()
+
+    def poll() -> None:
+        while not stop.is_set():
+            try:
+                info = json.loads((out / "meta/info.json").read_text())
+                files = sorted(p.name for p in (out / "data/chunk-000").iterdir())
+                seen.append((info["total_episodes"], files))
+            except (OSError, ValueError) as err:
+                seen.append(err)
+
+    set_hook(lambda step: time.sleep(0.05))  # a slow publish: a pause after every commit step
+    rename = Path.rename
+
+    def slow_rename(self: Path, target: Path) -> Path:
+        time.sleep(0.05)  # and before every rename (two renames in a row would leave a gap this long)
+        return rename(self, target)
+
+    monkeypatch.setattr(Path, "rename", slow_rename)
+    reader = threading.Thread(target=poll)
+    reader.start()
+    try:
+        for n in range(6):  # replace the dataset back and forth: 1 episode, 2 episodes, ...
+            write_dataset(staged[: 2 - n % 2], str(out), robot_type="r", overwrite=True)
+    finally:
+        set_hook(None)
+        stop.set()
+        reader.join()
+    assert len(seen) > 50, "the reader did not poll during the publishes"
+    assert [s for s in seen if not isinstance(s, tuple)] == []  # never missing, never half there
+    assert {s[0] for s in seen if isinstance(s, tuple)} == {1, 2}
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+
+
+@pytest.mark.parametrize("append", [False, True], ids=["overwrite", "append"])
+def test_without_an_atomic_exchange_two_renames_do_the_same(
+    staged: list[EpisodeSummary], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, append: bool
+) -> None:
+    monkeypatch.setattr(bagport.dataset.publish, "exchange", lambda a, b: False)
+    out = tmp_path / "ds"
+    write_dataset(staged[:1], str(out), robot_type="r")
+    write_dataset(staged[1:] if append else staged, str(out), robot_type="r", append=append, overwrite=True)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+    assert sorted(p.name for p in out.iterdir() if p.name.startswith(".")) == []
+    assert validate_dataset(out, decode_every=1000).episodes == 2
+
+
+def test_an_append_that_fails_while_moving_its_files_in_takes_them_out_again(
+    staged: list[EpisodeSummary], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    out = tmp_path / "ds"
+    write_dataset(staged[:1], str(out), robot_type="r")
+    before = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def disk_full(step: str) -> None:
+        if step == "local.append.moving":
+            raise OSError(28, "No space left on device")
+
+    set_hook(disk_full)
+    try:
+        with pytest.raises(OSError, match="No space left"):
+            write_dataset(staged[1:], str(out), robot_type="r", append=True)
+    finally:
+        set_hook(None)
+    assert {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]

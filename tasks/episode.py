@@ -80,7 +80,9 @@ def _staged(label: str, summary: EpisodeSummary) -> dict[str, Any]:
     tags=["bagport", "episode"],
 )
 def convert_batch_task(
-    requests: list[dict[str, Any]], labels: list[str], label: str  # noqa: ARG001 - names the task run
+    requests: list[dict[str, Any]],
+    labels: list[str],
+    label: str,  # noqa: ARG001 - names the task run
 ) -> list[dict[str, Any]]:
     """Convert small episodes one after another in one task run (Prefect's cost per task run is
     larger than such an episode's). Each bag keeps its own log lines (prefixed by its label) and its

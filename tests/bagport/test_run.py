@@ -12,7 +12,7 @@ import pytest
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import QualityError
-from bagport.run import EpisodeFailure, plan_run, reduce_run, stage_all
+from bagport.run import EpisodeFailure, PlannedEpisode, plan_run, reduce_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -33,7 +33,7 @@ def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-def _run(fleet: Path, out: Path, **options: object) -> tuple[ConvertConfig, list[str]]:
+def _run(fleet: Path, out: Path, **options: object) -> tuple[ConvertConfig, list[PlannedEpisode]]:
     config = ConvertConfig(
         manifest=str(fleet / "manifest.yaml"),
         contract=str(SAMPLE_CONTRACT),

@@ -84,17 +84,18 @@ def measure_fleet(workload: Path, out_root: Path, episodes: int) -> dict[str, di
 
 
 def fleet_table(fleet: dict[str, dict[str, float]], description: str) -> str:
-    first = fleet.get("first", {}).get("wall_s")
+    first = fleet.get("first", {})
     lines = [
         f"**W4** ({description}; staging kept between runs)",
         "",
-        "| run | wall s | of first run | CPU s | wall s / episode | CPU s / episode | flow process peak RSS MB | peak RSS MB (tree) |",
-        "|---|---|---|---|---|---|---|---|",
+        "| run | wall s | of first run | CPU s | of first run | wall s / episode | CPU s / episode | flow process peak RSS MB | peak RSS MB (tree) |",
+        "|---|---|---|---|---|---|---|---|---|",
     ]  # fmt: skip
     for name, m in fleet.items():
-        share = f"{100 * m['wall_s'] / first:.1f}%" if first else ""
+        share = {k: f"{100 * m[k] / first[k]:.1f}%" if first.get(k) else "" for k in ("wall_s", "cpu_s")}
         lines.append(
-            f"| {name} | {m['wall_s']:.1f} | {share} | {m['cpu_s']:.1f} | {m['wall_s'] / m['episodes']:.3f} | "
-            f"{m['cpu_s'] / m['episodes']:.3f} | {m['root_rss_mb']:.0f} | {m['peak_rss_mb']:.0f} |"
+            f"| {name} | {m['wall_s']:.1f} | {share['wall_s']} | {m['cpu_s']:.1f} | {share['cpu_s']} | "
+            f"{m['wall_s'] / m['episodes']:.3f} | {m['cpu_s'] / m['episodes']:.3f} | {m['root_rss_mb']:.0f} | "
+            f"{m['peak_rss_mb']:.0f} |"
         )
     return "\n".join(lines)

@@ -1,11 +1,12 @@
-"""`make bench`: bagport vs the LeRobot-writer baseline vs the codec floor, on W1/W2/W3.
+"""`make bench`: bagport vs the LeRobot-writer baseline vs the codec floor, on W1/W2/W3; W4, a fleet of
+2,000 one-second bags, converted once and re-run (``bench/fleet.py``).
 
 Each tool runs as a fresh process tree on the same generated bags; wall time, CPU seconds (the
 tree's, from the kernel's child accounting), peak RSS of the whole tree (sampled every 0.2 s) and
 output size are recorded; numbers are medians over ``--runs``. Results go to bench/results.json
 and into BENCHMARKS.md between the result markers (the rest of that file is prose, kept as is).
 
-Usage: python bench/run.py [--workloads W1,W2,W3] [--tools bagport,lerobot,lerobot-streaming,floor]
+Usage: python bench/run.py [--workloads W1,W2,W3,W4] [--tools bagport,lerobot,lerobot-streaming,floor]
                            [--runs 3] [--scale 1.0] [--data bench/.data] [--report BENCHMARKS.md]
                            [--results bench/results.json] [--keep-other-results]
                            [--keep-outputs] [--baseline-runs N]
@@ -30,6 +31,7 @@ from typing import Any
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from bench.fleet import fleet_table, measure_fleet
 from bench.report import write_section
 from bench.workloads import WORKLOADS, ensure_workload
 
@@ -68,18 +70,21 @@ def _command(tool: str, workload: Path, out: Path) -> list[str]:
     return [python, str(BENCH / "codec_floor.py"), str(workload), str(out)]
 
 
-def measure(command: list[str], out: Path) -> dict[str, float]:
-    """Run one command; wall, CPU seconds and peak RSS of its whole process tree, output size."""
-    shutil.rmtree(out, ignore_errors=True)
-    shutil.rmtree(out.with_name(out.name + ".staging"), ignore_errors=True)
+def measure(command: list[str], out: Path, *, fresh: bool = True) -> dict[str, float]:
+    """Run one command; wall, CPU seconds and peak RSS of its whole process tree and of the process
+    started (bagport's flow process), output size. ``fresh``: remove the output and staging first."""
+    if fresh:
+        shutil.rmtree(out, ignore_errors=True)
+        shutil.rmtree(out.with_name(out.name + ".staging"), ignore_errors=True)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
     proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    peak, peak_process = 0, 0
+    peak, peak_process, peak_root = 0, 0, 0
     while proc.poll() is None:
         try:
             rss = [p.memory_info().rss for p in [proc, *proc.children(recursive=True)] if p.is_running()]
             peak, peak_process = max(peak, sum(rss)), max(peak_process, *rss)
+            peak_root = max(peak_root, proc.memory_info().rss)
         except (psutil.Error, ValueError):
             pass
         time.sleep(0.2)
@@ -95,6 +100,7 @@ def measure(command: list[str], out: Path) -> dict[str, float]:
         "cpu_s": cpu,
         "peak_rss_mb": peak / 2**20,
         "peak_process_rss_mb": peak_process / 2**20,
+        "root_rss_mb": peak_root / 2**20,
         "output_mb": size / 1e6,
     }
 
@@ -125,6 +131,8 @@ def _table(results: dict[str, Any]) -> str:
              f"{results['machine']['memory_gb']} GB; versions {results['machine']['versions']}; "
              f"scale {results['scale']}; runs per cell in the table.", ""]  # fmt: skip
     for name, workload in results["workloads"].items():
+        if "tools" not in workload:
+            continue
         lines += [f"**{name}** ({workload['description']}; {workload['recorded_s']:.0f} s recorded)", ""]
         lines += ["| tool | runs | wall s | recorded s / wall s | CPU s | peak RSS MB (tree) | largest process MB | output MB | bagport vs this |",
                   "|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
@@ -147,13 +155,16 @@ def _table(results: dict[str, Any]) -> str:
 
 def write_report(results: dict[str, Any], report: Path) -> None:
     write_section(report, "results", _table(results))
+    fleet = results["workloads"].get("W4")
+    if fleet is not None:
+        write_section(report, "fleet", fleet_table(fleet["fleet"], fleet["description"]))
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--workloads", default="W1,W2,W3")
+    parser.add_argument("--workloads", default="W1,W2,W3,W4")
     parser.add_argument("--tools", default=",".join(TOOLS))
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument(
@@ -186,6 +197,15 @@ def main() -> None:
             flush=True,
         )
         folder = ensure_workload(workload, args.data)
+        if name == "W4":  # a fleet: bagport's first run and re-runs, not a comparison of tools
+            results["workloads"][name] = {
+                "description": workload.description,
+                "recorded_s": workload.recorded_s,
+                "fleet": measure_fleet(folder, args.data / "out", workload.episodes),
+            }
+            args.results.write_text(json.dumps(results, indent=1))
+            write_report(results, args.report)
+            continue
         cells: dict[str, Any] = {}
         counts = {
             t: args.baseline_runs if t in BASELINES and args.baseline_runs else args.runs for t in tools

@@ -50,7 +50,7 @@ class Progress:
         update_progress_artifact(self._id, self._percent(), description=self._text())
 
     def _percent(self) -> float:
-        return 100.0 * self._done / max(self._total, 1)
+        return 100.0 * self._done / self._total if self._total else 100.0  # nothing to convert: done
 
     def advance(self, episodes: int = 1) -> None:
         """Episodes finished (several at once from a task run that converted several)."""

@@ -162,7 +162,9 @@ def test_changed_msg_definitions_reconvert_and_unchanged_ones_reuse(
     )
     first = convert_episode(plan_run(config).requests[0])
     # the same definitions, and a QA policy applied only when the dataset is written: reused, not read
-    again = plan_run(config.model_copy(update={"on_qa_fail": "keep", "keep_failed": True})).requests[0]
+    rerun = config.model_copy(update={"on_qa_fail": "keep", "keep_failed": True})
+    assert (len(plan_run(rerun).requests), len(plan_run(rerun).reused)) == (0, 1)  # the plan finds it staged
+    again = plan_run(rerun, reuse=False).requests[0]  # and so does the worker, asked to convert it
     assert again.episode_id == first.episode_id
     with monkeypatch.context() as patched:
         patched.setattr("bagport.episode.convert.open_bag", _must_not_open)

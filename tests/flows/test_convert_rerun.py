@@ -33,7 +33,9 @@ CAMERAS = (
     CameraSpec("wrist", "jpeg", height=32, width=32),
 )
 SUBMITTED: list[str] = []
-"""Labels of the conversion tasks submitted to the task runner, in order."""
+"""Labels of the episodes submitted to the task runner in conversion tasks, in order."""
+BATCHES: list[int] = []
+"""Sizes of the batch task runs submitted."""
 
 
 class _CountingRunner(ThreadPoolTaskRunner[Any]):
@@ -42,6 +44,9 @@ class _CountingRunner(ThreadPoolTaskRunner[Any]):
     def submit(self, task: Any, parameters: dict[str, Any], *args: Any, **kwargs: Any) -> Any:
         if task.name == "convert-episode":
             SUBMITTED.append(str(parameters["label"]))
+        elif task.name == "convert-episodes":  # a batch of small episodes
+            SUBMITTED.extend(str(label) for label in parameters["labels"])
+            BATCHES.append(len(parameters["labels"]))
         return super().submit(task, parameters, *args, **kwargs)
 
 
@@ -74,6 +79,7 @@ def _convert(manifest: Path, out: Path, staging: Path, **options: Any) -> tuple[
         encoder=FAST_CODEC, runner="thread", workers=1, keep_staging=True, **options,
     )  # fmt: skip
     SUBMITTED.clear()
+    BATCHES.clear()
     report = run_config(config)
     return report, list(SUBMITTED)
 
@@ -185,3 +191,25 @@ def test_reused_episodes_take_the_current_manifests_entry_order_and_metadata(
     state_a = data_a[data_a["episode_index"] == 0]["observation.state"].tolist()
     state_b = data_b[data_b["episode_index"] == 1]["observation.state"].tolist()
     assert [list(v) for v in state_b] == [list(v) for v in state_a]
+
+
+def test_small_episodes_share_a_task_run_and_each_bag_fails_alone(
+    prefect: None, bags: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(flows.convert, "batch_size", lambda episodes, workers: 2)
+    (bags / "broken.mcap").write_bytes(b"this is not an MCAP file")
+    manifest = bags / "with-broken.yaml"
+    manifest.write_text(
+        "bags:\n" + "".join(f"  - uri: {n}\n" for n in ("bag_004", "broken.mcap", "bag_005", "bag_007"))
+    )
+    report, submitted = _convert(manifest, tmp_path / "ds", tmp_path / "staging")
+    assert BATCHES == [2, 2]
+    assert submitted == ["bag_004", "broken.mcap", "bag_005", "bag_007"]
+    assert report.episodes == 3
+    assert [(row["manifest_entry"], Path(row["bag_uri"]).name) for row in report.excluded] == [
+        (1, "broken.mcap")
+    ]
+    assert "broken.mcap" in report.excluded[0]["reason"]
+    assert "conversion failed" in report.excluded[0]["reason"]
+    episodes = _record(tmp_path / "ds")["episodes"]
+    assert [Path(e["bag_uri"]).name for e in episodes] == ["bag_004", "bag_005", "bag_007"]

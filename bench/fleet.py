@@ -1,0 +1,101 @@
+"""W4, fleet operation: what a first run, a re-run with nothing new and a re-run after touching a few bags
+cost, with the staging store kept between runs (``--keep-staging``, as a scheduled re-conversion does).
+
+Phases, each a fresh ``bagport convert`` process tree measured by :func:`bench.run.measure`:
+
+- ``first 100``: the first 100 bags alone (fresh staging): the flow process's peak memory at 100 episodes;
+- ``first``: every bag (fresh staging);
+- ``no-op re-run``: the same again with ``--overwrite``: every episode is staged, none is converted,
+  the dataset is written again from the staging store;
+- ``no-op append``: ``--append`` of the same manifest into the dataset: nothing new, nothing submitted;
+- ``touched re-run``: :data:`TOUCHED` bags' files get a new modification time, then ``--overwrite``:
+  exactly those convert again.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+from pathlib import Path
+
+import yaml
+
+__all__ = ["TOUCHED", "fleet_table", "measure_fleet"]
+
+TOUCHED = 20
+SMALL = 100
+
+
+def _command(workload: Path, manifest: Path, out: Path, *extra: str) -> list[str]:
+    bagport = str(Path(sys.executable).with_name("bagport"))
+    return [
+        bagport, "convert", "--manifest", str(manifest), "--contract", str(workload / "contract.yaml"),
+        "--output", str(out), "--staging", f"{out}.staging", "--keep-staging", "--codec", "lerobot-default",
+        "--on-qa-fail", "keep", "--quiet", *extra,
+    ]  # fmt: skip
+
+
+def _touch(workload: Path, count: int) -> None:
+    """Give the files of ``count`` bags, spread over the fleet, a new modification time."""
+    bags = yaml.safe_load((workload / "manifest.yaml").read_text())["bags"]
+    step = max(1, len(bags) // count)
+    for entry in bags[::step][:count]:
+        for item in sorted((workload / entry["uri"]).rglob("*")):
+            if item.is_file():
+                stat = item.stat()
+                os.utime(item, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+
+
+def measure_fleet(workload: Path, out_root: Path, episodes: int) -> dict[str, dict[str, float]]:
+    from bench.run import measure  # noqa: PLC0415 - bench.run imports this module
+
+    out_root.mkdir(parents=True, exist_ok=True)
+    manifest = workload / "manifest.yaml"
+    small = workload / f"manifest-first-{SMALL}.yaml"
+    bags = yaml.safe_load(manifest.read_text())["bags"]
+    small.write_text(yaml.safe_dump({"bags": bags[:SMALL]}))
+    out = out_root / "W4-fleet"
+    phases: dict[str, tuple[list[str], int, bool]] = {
+        f"first {min(SMALL, episodes)}": (
+            _command(workload, small, out_root / "W4-small"),
+            min(SMALL, episodes),
+            True,
+        ),
+        "first": (_command(workload, manifest, out), episodes, True),
+        "no-op re-run": (_command(workload, manifest, out, "--overwrite"), episodes, False),
+        "no-op append": (_command(workload, manifest, out, "--append"), episodes, False),
+        f"touched re-run ({TOUCHED} bags)": (
+            _command(workload, manifest, out, "--overwrite"),
+            episodes,
+            False,
+        ),
+    }
+    results: dict[str, dict[str, float]] = {}
+    for name, (command, count, fresh) in phases.items():
+        if name.startswith("touched"):
+            _touch(workload, TOUCHED)
+        measured = measure(command, Path(command[command.index("--output") + 1]), fresh=fresh)
+        measured["episodes"] = count
+        results[name] = measured
+        print(f"W4 {name}: {measured}", flush=True)
+    shutil.rmtree(out_root / "W4-small.staging", ignore_errors=True)
+    return results
+
+
+def fleet_table(fleet: dict[str, dict[str, float]], description: str) -> str:
+    first = fleet.get("first", {})
+    lines = [
+        f"**W4** ({description}; staging kept between runs)",
+        "",
+        "| run | wall s | of first run | CPU s | of first run | wall s / episode | CPU s / episode | flow process peak RSS MB | peak RSS MB (tree) |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]  # fmt: skip
+    for name, m in fleet.items():
+        share = {k: f"{100 * m[k] / first[k]:.1f}%" if first.get(k) else "" for k in ("wall_s", "cpu_s")}
+        lines.append(
+            f"| {name} | {m['wall_s']:.1f} | {share['wall_s']} | {m['cpu_s']:.1f} | {share['cpu_s']} | "
+            f"{m['wall_s'] / m['episodes']:.3f} | {m['cpu_s'] / m['episodes']:.3f} | {m['root_rss_mb']:.0f} | "
+            f"{m['peak_rss_mb']:.0f} |"
+        )
+    return "\n".join(lines)

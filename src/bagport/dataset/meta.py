@@ -81,8 +81,6 @@ _SKETCH_FIELDS = ("sketch", "step_sketch", "max_step", "max_step_frame")
 class EpisodeStats:
     stats: dict[str, FeatureStats]
     histograms: dict[str, npt.NDArray[np.int64]]
-    sketches: DatasetSketches = field(default_factory=DatasetSketches)
-    """Quantile sketches of every non-video feature, step sketches of the staged vector features."""
     largest_steps: dict[str, tuple[list[float], list[int]]] = field(default_factory=dict)
     """Per staged vector feature: each dimension's largest frame-to-frame step and the frame it ends at."""
 
@@ -98,14 +96,20 @@ def _vector_fields(summary: EpisodeSummary, key: str, values: dict[str, Any]) ->
 
 
 def load_episode_stats(
-    summary: EpisodeSummary, episode_index: int, placement: DataPlacement, task_indices: npt.NDArray[np.int64]
+    summary: EpisodeSummary,
+    episode_index: int,
+    placement: DataPlacement,
+    task_indices: npt.NDArray[np.int64],
+    sketches: DatasetSketches,
 ) -> EpisodeStats:
+    """The episode's stats; its quantile sketches (every non-video feature) and step sketches (the staged
+    vector features) are merged into ``sketches``, so memory holds one merged sketch, not one per episode."""
     fs, path = url_to_fs(summary.file(STATS_FILE))
     with fs.open(path, "r") as handle:
         raw: dict[str, dict[str, Any]] = json.load(handle)
     stats: dict[str, FeatureStats] = {}
     histograms: dict[str, npt.NDArray[np.int64]] = {}
-    sketches = DatasetSketches()
+    mine = DatasetSketches()
     largest: dict[str, tuple[list[float], list[int]]] = {}
     videos = {f.key for f in summary.features if f.video_info is not None}
     for key, values in raw.items():
@@ -114,8 +118,8 @@ def load_episode_stats(
             histograms[key] = np.asarray(hist, dtype=np.int64)
         if key not in videos:
             fields = _vector_fields(summary, key, values)
-            sketches.values[key] = VectorSketch.from_json(fields["sketch"])
-            sketches.steps[key] = VectorSketch.from_json(fields["step_sketch"])
+            mine.values[key] = VectorSketch.from_json(fields["sketch"])
+            mine.steps[key] = VectorSketch.from_json(fields["step_sketch"])
             largest[key] = (list(fields["max_step"]), list(fields["max_step_frame"]))
         stats[key] = stats_from_json(values)
     frames = summary.frames
@@ -129,8 +133,9 @@ def load_episode_stats(
     }
     for key, column in defaults.items():
         stats[key] = vector_stats(column)
-        sketches.values[key] = VectorSketch.of(column)
-    return EpisodeStats(stats, histograms, sketches, largest)
+        mine.values[key] = VectorSketch.of(column)
+    sketches.merge(mine)
+    return EpisodeStats(stats, histograms, largest)
 
 
 def build_info(
@@ -198,11 +203,13 @@ def write_meta(
     videos: dict[str, list[VideoPlacement]],
     episode_stats: Sequence[EpisodeStats],
     info: dict[str, Any],
+    sketches: DatasetSketches,
     base: DatasetBase | None = None,
 ) -> DatasetSketches:
     """Write ``meta/``; with ``base`` (an append) the new episodes continue the existing ones in new
     episodes files, and stats merge with the existing dataset's (its stored sketches, never its data
-    files). Returns the dataset's merged sketches (the fleet distribution the jump check judges by)."""
+    files). ``sketches``: the new episodes' merged sketches (:func:`load_episode_stats`). Returns the
+    dataset's merged sketches (the fleet distribution the jump check judges by)."""
     first_episode = base.episodes if base is not None else 0
     (root / "meta").mkdir(parents=True, exist_ok=True)
     (root / INFO_PATH).write_text(json.dumps(info, indent=4))
@@ -247,7 +254,7 @@ def write_meta(
         file_size_in_mb=float(info["data_files_size_in_mb"]),
         chunks_size=int(info["chunks_size"]),
     )
-    return _write_stats(root, features, stat_keys, episode_stats, base)
+    return _write_stats(root, features, stat_keys, episode_stats, sketches, base)
 
 
 def _base_sketches(base: DatasetBase, keys: Sequence[str]) -> DatasetSketches:
@@ -261,13 +268,12 @@ def _write_stats(
     features: Sequence[StagedFeature],
     stat_keys: Sequence[str],
     episode_stats: Sequence[EpisodeStats],
+    sketches: DatasetSketches,
     base: DatasetBase | None,
 ) -> DatasetSketches:
     """``stats.json`` (LeRobot's format), the pixel histograms and the merged sketches."""
-    sketch_keys = [k for k in stat_keys if k in episode_stats[0].sketches.values]
-    sketches = _base_sketches(base, sketch_keys) if base is not None else DatasetSketches()
-    for ep in episode_stats:
-        sketches.merge(ep.sketches)
+    if base is not None:
+        sketches.merge(_base_sketches(base, [k for k in stat_keys if k in sketches.values]))
     merged_stats: dict[str, FeatureStats] = {}
     histograms: dict[str, list[int]] = {}
     levels = {f.key: histogram_levels(f.video_info) for f in features if f.video_info is not None}

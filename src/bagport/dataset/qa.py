@@ -123,26 +123,22 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
     return pa.table(rows, schema=QA_SCHEMA)
 
 
-def _read_index(root: Path, run_number: int) -> pa.Table:
-    """Every run's index rows (a dataset written before the index existed: from its summary.json)."""
-    paths = sorted((root / "meta/qa/index").glob("run-*.parquet"))
-    tables = [pq.read_table(p, schema=INDEX_SCHEMA) for p in paths]
+def _migrate_legacy_summary(root: Path, run_number: int) -> None:
+    """A dataset written before the QA index existed: its ``summary.json`` (every earlier run's episodes)
+    becomes ``index/run-000.parquet``, once (their checks lists are not known: empty)."""
     summary_path = root / QA_SUMMARY_PATH
-    if (
-        run_number
-        and len(paths) <= 1
-        and summary_path.is_file()
-        and not (root / QA_INDEX_PATH.format(run=0)).is_file()
-    ):
-        legacy = json.loads(summary_path.read_text()).get("episodes", [])
-        rows = [
-            {**{k: e.get(k) for k in _BRIEF_KEYS}, "run": 0, "position": n, "name": str(e["bag_uri"]).rsplit("/", 1)[-1],
-             "robot_type": "", "folder": str(e["bag_uri"]).rsplit("/", 1)[0], "day": "unknown",
-             "fails": [], "warns": [], "detail": False}
-            for n, e in enumerate(legacy)
-        ]  # fmt: skip
-        tables.insert(0, pa.Table.from_pylist(rows, schema=INDEX_SCHEMA))
-    return pa.concat_tables(tables)
+    legacy_path = root / QA_INDEX_PATH.format(run=0)
+    if not run_number or legacy_path.is_file() or not summary_path.is_file():
+        return
+    legacy = json.loads(summary_path.read_text()).get("episodes", [])
+    rows = [
+        {**{k: e.get(k) for k in _BRIEF_KEYS}, "run": 0, "position": n, "name": str(e["bag_uri"]).rsplit("/", 1)[-1],
+         "robot_type": "", "folder": str(e["bag_uri"]).rsplit("/", 1)[0], "day": "unknown",
+         "fails": [], "warns": [], "detail": False}
+        for n, e in enumerate(legacy)
+    ]  # fmt: skip
+    legacy_path.parent.mkdir(parents=True, exist_ok=True)
+    pq.write_table(pa.Table.from_pylist(rows, schema=INDEX_SCHEMA), legacy_path, compression="zstd")
 
 
 def write_qa(
@@ -160,6 +156,7 @@ def write_qa(
     table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
     table_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(qa_rows(entries), table_path, compression="zstd")
+    _migrate_legacy_summary(root, run_number)
     index = index_table(entries, run_number, robot_type)
     index_path = root / QA_INDEX_PATH.format(run=run_number)
     index_path.parent.mkdir(parents=True, exist_ok=True)
@@ -171,7 +168,9 @@ def write_qa(
             page.parent.mkdir(parents=True, exist_ok=True)
             html = render_episode_page(entry, names, int(fps) if fps else None, "../../report.html")
             page.write_text(html, encoding="utf-8")
-    whole = _read_index(root, run_number)
+    whole = pa.concat_tables(
+        pq.read_table(p, schema=INDEX_SCHEMA) for p in sorted((root / "meta/qa/index").glob("run-*.parquet"))
+    )
     episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in whole.select(list(_BRIEF_KEYS)).to_pylist()]
     summary = {
         "episodes": episodes,

@@ -22,6 +22,7 @@ from bagport.dataset.publish import building_beside, commit_append, swap_into_pl
 from bagport.dataset.qa import add_fleet_checks, write_qa
 from bagport.dataset.remote import append_remote, publish_remote
 from bagport.dataset.repair import repair_dataset
+from bagport.dataset.sketches import DatasetSketches
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
 from bagport.qa import QAEntry
@@ -136,8 +137,9 @@ def _build(
         )
         for key in video_keys
     }
+    sketches = DatasetSketches()  # the new episodes' quantile and step sketches, merged as they load
     episode_stats = [
-        load_episode_stats(s, first_episode + i, data[i], _task_indices(s, task_index))
+        load_episode_stats(s, first_episode + i, data[i], _task_indices(s, task_index), sketches)
         for i, s in enumerate(summaries)
     ]
     new_frames = sum(s.frames for s in summaries)
@@ -152,7 +154,7 @@ def _build(
     )
     if base is not None:
         _check_same_features(base, info)
-    sketches = write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, base)
+    sketches = write_meta(root, summaries, features, tasks, data, videos, episode_stats, info, sketches, base)
     qa = add_fleet_checks(qa, episode_stats, sketches, features, qa_config, fps)  # jumps vs the fleet
     write_provenance(root, summaries, data, run_record, base)
     size = sum(p.stat().st_size for p in root.rglob("*") if p.is_file())

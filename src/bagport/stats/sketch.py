@@ -29,6 +29,14 @@ SKETCH_K = 800
 """KLL accuracy parameter: 0.35 % normalised rank error (99 % confidence); about 18 KB per dimension."""
 
 
+def _frames_by_dims(values: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """``values`` as (frames, dims): a vector per frame stays as it is, a scalar per frame is one dim."""
+    data = np.asarray(values, dtype=np.float64)
+    if data.ndim == 1:
+        return data[:, None]
+    return data.reshape(data.shape[0], int(np.prod(data.shape[1:])))
+
+
 def rank_error(k: int = SKETCH_K) -> float:
     """The normalised rank error a single quantile read from a KLL sketch of accuracy ``k`` stays within."""
     return float(kll_doubles_sketch.get_normalized_rank_error(k, False))
@@ -42,8 +50,7 @@ class VectorSketch:
 
     @classmethod
     def of(cls, values: npt.ArrayLike, k: int = SKETCH_K) -> VectorSketch:
-        data = np.asarray(values, dtype=np.float64)
-        data = data.reshape(data.shape[0], -1) if data.ndim != 1 else data[:, None]
+        data = _frames_by_dims(values)
         sketch = cls(data.shape[1], k)
         sketch.update(data)
         return sketch
@@ -99,15 +106,14 @@ def episode_sketch_fields(values: npt.ArrayLike) -> dict[str, Any]:
     """What a staged episode keeps of one vector feature for the dataset's quantiles and the fleet
     jump check: the values' sketches, the sketches of ``|step|`` (frame-to-frame change), and per
     dimension the largest step and the frame it ends at."""
-    data = np.asarray(values, dtype=np.float64)
-    data = data.reshape(data.shape[0], -1) if data.ndim != 1 else data[:, None]
+    data = _frames_by_dims(values)
     steps = np.abs(np.diff(data, axis=0))
     finite = np.where(np.isfinite(steps), steps, -1.0)
     at = finite.argmax(axis=0) if len(steps) else np.zeros(data.shape[1], dtype=np.int64)
     largest = finite.max(axis=0) if len(steps) else np.zeros(data.shape[1])
     return {
         "sketch": VectorSketch.of(data).to_json(),
-        "step_sketch": VectorSketch.of(steps.reshape(-1, data.shape[1])).to_json(),
+        "step_sketch": VectorSketch.of(steps).to_json(),
         "max_step": np.maximum(largest, 0.0).tolist(),
         "max_step_frame": (np.asarray(at) + 1).tolist(),
     }

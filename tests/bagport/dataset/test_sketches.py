@@ -6,6 +6,8 @@ episode files."""
 from __future__ import annotations
 
 import json
+import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -14,7 +16,10 @@ import pytest
 import s3fs
 
 from bagport.dataset import DatasetLimits, write_dataset
+from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import SKETCHES_PATH
+from bagport.dataset.meta import load_episode_stats
+from bagport.dataset.sketches import DatasetSketches
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
 from bagport.staging import EpisodeSummary
@@ -151,3 +156,26 @@ def test_s3_append_reads_no_old_object(
     assert any(key.endswith(SKETCHES_PATH) for key in reads)  # the stored sketch is what it reads
     fs.invalidate_cache()
     assert {p: fs.cat_file(p) for p in old} == old
+
+
+def test_an_episode_staged_before_sketches_is_sketched_from_its_staged_frames(
+    staged: tuple[list[EpisodeSummary], list[EpisodeSummary]], tmp_path: Path
+) -> None:
+    summary = staged[0][5]
+    old = tmp_path / "old-episode"
+    shutil.copytree(summary.dir_uri, old)
+    stats = json.loads((old / "stats.json").read_text())
+    for values in stats.values():
+        for name in ("sketch", "step_sketch", "max_step", "max_step_frame"):
+            values.pop(name, None)
+    (old / "stats.json").write_text(json.dumps(stats))
+    placement = DataPlacement(0, 0, 0, summary.frames)
+    tasks = np.zeros(summary.frames, dtype=np.int64)
+    current, legacy = DatasetSketches(), DatasetSketches()
+    fresh = load_episode_stats(summary, 0, placement, tasks, current)
+    again = load_episode_stats(replace(summary, dir_uri=str(old)), 0, placement, tasks, legacy)
+    assert again.largest_steps == fresh.largest_steps
+    for key in ("observation.state", "action"):
+        for kind in ("values", "steps"):
+            mine, theirs = getattr(current, kind)[key], getattr(legacy, kind)[key]
+            assert mine.to_json() == theirs.to_json(), (key, kind)

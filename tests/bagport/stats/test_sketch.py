@@ -109,3 +109,10 @@ def test_sketches_merged_in_any_pieces_stay_within_the_bound(
     merged = VectorSketch.merged(VectorSketch.of(p) for p in parts)
     assert merged is not None
     assert_within_rank_bound(np.concatenate(parts), merged.quantiles())
+
+
+def test_a_one_frame_episode_has_no_step() -> None:
+    fields = episode_sketch_fields(np.array([[0.5, 1.0, np.nan]]))
+    assert fields["max_step"] == [0.0, 0.0, 0.0]
+    assert VectorSketch.from_json(fields["step_sketch"]).count == 0
+    assert VectorSketch.from_json(fields["sketch"]).quantile(0.5).tolist()[:2] == [0.5, 1.0]

@@ -147,15 +147,58 @@ def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
     try:
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:
             page_size = int(db.execute("PRAGMA page_size").fetchone()[0])
-            rows = [str(row[0]) for row in db.execute("PRAGMA integrity_check(5)")]
+            roots = [(str(n), int(r)) for n, r in db.execute("SELECT name, rootpage FROM sqlite_master") if r]
+            try:
+                rows = [str(row[0]) for row in db.execute("PRAGMA integrity_check(5)")]
+            except sqlite3.DatabaseError as err:
+                return _walk_btrees(path, page_size, roots) or Damage(path.name, None, f"SQLite: {err}")
     except sqlite3.Error as err:
-        return Damage(path.name, 0, f"SQLite cannot read its header or schema ({err})")
+        return Damage(path.name, None, f"SQLite cannot read its header or schema ({err})")
     if rows == ["ok"]:
         return None
     pages = re.findall(r"page (\d+)", " ".join(rows))
     offset = (int(pages[0]) - 1) * page_size if pages else None
     found = "; ".join(" ".join(row.split()) for row in rows[:3])
     return Damage(path.name, offset, f"SQLite's integrity check finds damaged pages ({found})")
+
+
+_LEAF, _INTERIOR = {0x0A, 0x0D}, {0x02, 0x05}
+
+
+def _walk_btrees(path: Path, page_size: int, roots: list[tuple[str, int]]) -> Damage | None:
+    """The first b-tree page whose header is damaged (when SQLite's own check gives up), walking each
+    table and index from its root page."""
+    pages = path.stat().st_size // page_size
+    with path.open("rb") as handle:
+        for name, root in roots:
+            todo, seen = [root], set()
+            while todo:
+                page = todo.pop()
+                if page in seen:
+                    continue
+                seen.add(page)
+                offset = (page - 1) * page_size
+                if not 1 <= page <= pages:
+                    return Damage(
+                        path.name, None, f"b-tree of {name} points at page {page}, past the file's end"
+                    )
+                handle.seek(offset)
+                buf = handle.read(page_size)
+                head = 100 if page == 1 else 0
+                kind, cells = buf[head], int.from_bytes(buf[head + 3 : head + 5], "big")
+                size = 8 if kind in _LEAF else 12
+                if kind not in _LEAF | _INTERIOR or head + size + 2 * cells > page_size:
+                    return Damage(path.name, offset, f"page {page} of {name} has a damaged b-tree header")
+                if kind in _INTERIOR:
+                    pointers = [
+                        int.from_bytes(buf[head + 12 + 2 * i : head + 14 + 2 * i], "big")
+                        for i in range(cells)
+                    ]
+                    if any(not size <= p < page_size - 4 for p in pointers):
+                        return Damage(path.name, offset, f"page {page} of {name} has damaged cell pointers")
+                    todo += [int.from_bytes(buf[p : p + 4], "big") for p in pointers]
+                    todo.append(int.from_bytes(buf[head + 8 : head + 12], "big"))
+    return None
 
 
 def _ros1_header(buf: bytes) -> dict[str, bytes]:

@@ -155,11 +155,47 @@ def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
     except sqlite3.Error as err:
         return Damage(path.name, None, f"SQLite cannot read its header or schema ({err})")
     if rows == ["ok"]:
-        return None
+        return _sqlite_row_types(path, uri)
     pages = re.findall(r"page (\d+)", " ".join(rows))
-    offset = (int(pages[0]) - 1) * page_size if pages else None
     found = "; ".join(" ".join(row.split()) for row in rows[:3])
+    if not pages:  # a bare "malformed": the rows or the b-trees may still say where
+        located = _sqlite_row_types(path, uri) or _walk_btrees(path, page_size, roots)
+        if located is not None:
+            return located
+    offset = (int(pages[0]) - 1) * page_size if pages else None
     return Damage(path.name, offset, f"SQLite's integrity check finds damaged pages ({found})")
+
+
+_ROWS = (
+    "SELECT messages.id, topics.name, typeof(messages.timestamp), typeof(messages.data) FROM messages "
+    "LEFT JOIN topics ON topics.id = messages.topic_id ORDER BY messages.id"
+)
+
+
+def _sqlite_row_types(path: Path, uri: str) -> Damage | None:
+    """The first message row that cannot be read, whose columns are of the wrong type or whose topic is
+    missing: a bit flip in a record header that SQLite's structural check does not place."""
+    last: tuple[int, str] | None = None
+    try:
+        with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:
+            for rowid, topic, stamp_type, data_type in db.execute(_ROWS):
+                if topic is None:
+                    return Damage(
+                        path.name, None, f"message row {rowid} names a topic the topics table lacks"
+                    )
+                if (stamp_type, data_type) != ("integer", "blob"):
+                    return Damage(
+                        path.name,
+                        None,
+                        f"message row {rowid} holds a {stamp_type} timestamp and a {data_type} payload "
+                        "(an integer and a blob belong there)",
+                        (str(topic),),
+                    )
+                last = (int(rowid), str(topic))
+    except sqlite3.Error as err:
+        after = f" after row {last[0]} (on {last[1]})" if last is not None else ""
+        return Damage(path.name, None, f"the message row{after} cannot be read ({err})")
+    return None
 
 
 _LEAF, _INTERIOR = {0x0A, 0x0D}, {0x02, 0x05}

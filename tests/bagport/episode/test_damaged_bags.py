@@ -172,6 +172,7 @@ def test_a_flip_in_a_sqlite_value_is_undetectable_and_the_episode_says_so(
     assert "integrity.unchecked" in [p["check"] for p in summary.qa["problems"]]
 
 
+@pytest.mark.slow
 def test_the_cli_reports_a_damaged_sqlite_row_without_a_traceback(tmp_path: Path) -> None:
     """The issue's case ("Task run encountered an exception TypeError: object of type 'int' has no len()")
     through `bagport convert`, in a fresh process as a user runs it."""

@@ -34,6 +34,8 @@ __all__ = ["Damage", "locate_damage"]
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 _CHUNK_HEAD = struct.Struct("<QQQI")
+MAX_RECORD_BYTES = 1 << 30
+"""A record (chunk) claiming more is damaged: nothing larger is read into memory while locating."""
 _DECOMPRESS: dict[str, Callable[[bytes], bytes]] = {
     "": lambda data: data,
     "none": lambda data: data,
@@ -133,7 +135,12 @@ def _locate_mcap(path: Path | RemotePath) -> Damage | None:
         channels = {cid: channel.topic for cid, channel in summary.channels.items()}
         for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             handle.seek(index.chunk_start_offset)
-            problem = _mcap_chunk_problem(handle.read(index.chunk_length), channels)
+            if index.chunk_length > MAX_RECORD_BYTES:
+                problem: str | None = (
+                    f"the chunk index gives an implausible length ({index.chunk_length} bytes)"
+                )
+            else:
+                problem = _mcap_chunk_problem(handle.read(index.chunk_length), channels)
             if problem is not None:
                 topics = sorted({channels.get(cid, f"channel {cid}") for cid in index.message_index_offsets})
                 return Damage(path.name, index.chunk_start_offset, problem, tuple(topics))
@@ -267,7 +274,7 @@ def _ros1_record(read: Callable[[int], bytes], left: int) -> tuple[dict[str, byt
         raise _BadRecordError(f"header length {header_len} runs past the end")
     header = _ros1_header(read(header_len))
     (data_len,) = _U32.unpack(read(4))
-    if header_len + 8 + data_len > left:
+    if header_len + 8 + data_len > left or data_len > MAX_RECORD_BYTES:
         raise _BadRecordError(f"data length {data_len} runs past the end")
     return header, read(data_len)
 

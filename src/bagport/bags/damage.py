@@ -35,6 +35,9 @@ STORAGE_ERRORS = (
     EOFError,
     AssertionError,  # rosbags checks a ROS 1 record against its index with assert
     RuntimeError,  # lz4 decompression
+    TypeError,  # a damaged QoS or metadata string parsed as the wrong shape
+    OverflowError,  # a damaged length seeks past what the OS can address
+    MemoryError,  # a damaged length asks for an impossible read (fails before allocating)
     struct.error,
     zstd.ZstdError,
 )

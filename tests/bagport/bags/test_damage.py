@@ -5,6 +5,7 @@ metadata.yaml that contradicts the files is named, not the intact data file."""
 from __future__ import annotations
 
 import re
+import shutil
 import sqlite3
 from pathlib import Path
 
@@ -226,3 +227,29 @@ def test_inspect_says_whether_the_bag_carries_checksums(
         assert reader.info.checksums is not None and reader.info.checksums.checked == crcs
     assert line in text
     assert ("Fix: " in text) != crcs
+
+
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3", "ros1"])
+def test_no_bit_flip_escapes_as_a_raw_exception(tmp_path: Path, storage: str) -> None:
+    """A sweep of flips over a small bag of each format (MCAP without CRCs: nothing refuses a changed
+    byte early): every read either succeeds or fails with one bagport paragraph, never a library error."""
+    clean = tmp_path / ("clean.bag" if storage == "ros1" else "clean")
+    write_episode_bag(clean, storage, EpisodeSpec(duration_s=0.3, cameras=()))  # type: ignore[arg-type]
+    source = clean if storage == "ros1" else next(p for p in clean.iterdir() if p.suffix in (".mcap", ".db3"))
+    data = source.read_bytes()
+    refused = 0
+    for offset in range(5, len(data), len(data) // 60):
+        bag = tmp_path / f"flip{offset}"
+        if storage == "ros1":
+            bag.write_bytes(data)
+            target = bag
+        else:
+            shutil.copytree(clean, bag)
+            target = bag / source.name
+        _flip(target, offset)
+        try:
+            _read_all(bag)
+        except BagportError as err:
+            _one_paragraph(err)
+            refused += 1
+    assert refused > 0

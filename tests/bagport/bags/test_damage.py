@@ -18,6 +18,7 @@ from rosbags.typesys import Stores, get_typestore
 from bagport.bags import format_bag_info, open_bag
 from bagport.errors import BagportError, BagReadError, DecodeError
 from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import realbag
 
 SPEC = EpisodeSpec(duration_s=3.0, cameras=(), mcap_crcs=True)
 STORE_ROS1 = get_typestore(Stores.ROS1_NOETIC)
@@ -253,3 +254,17 @@ def test_no_bit_flip_escapes_as_a_raw_exception(tmp_path: Path, storage: str) ->
             _one_paragraph(err)
             refused += 1
     assert refused > 0
+
+
+def test_a_real_compressed_mcap_with_chunk_crcs_refuses_a_changed_byte(tmp_path: Path) -> None:
+    bag = tmp_path / "wbag"
+    shutil.copytree(realbag("rosbag2_split/wbag"), bag)
+    chunk = _chunk_offsets(bag / "wbag_2.mcap")[0]
+    _flip(bag / "wbag_2.mcap", chunk + 100)
+    with pytest.raises(BagReadError) as caught:
+        _read_all(bag)
+    text = _one_paragraph(caught.value)
+    # its chunks are zstd-compressed: the flip breaks the stream before the CRC is reached
+    assert re.search(
+        rf"wbag_2\.mcap at byte offset {chunk}: chunk (fails its CRC-32|does not decompress)", text
+    )

@@ -23,6 +23,13 @@ def test_inspect_prints_what_ros2_bag_info_prints(capsys: pytest.CaptureFixture[
     assert "Count:      15" in out
     assert "Storage id:        ros1" in out
     assert "Topic: /turtle1/pose" in out
+    # neither carries checksums: both say so, with the recorder setting that would add them
+    assert (
+        "Checksums:         none: MCAP without chunk CRCs (rosbag2_2025_09_10-13_03_56_0.mcap was written"
+        in out
+    )
+    assert "Checksums:         none: ROS 1 bags carry no checksums" in out
+    assert out.count("Warning:") == 2 and "`noCRC: false`" in out
 
 
 def test_inspect_of_a_non_bag_is_one_clear_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

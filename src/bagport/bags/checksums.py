@@ -26,15 +26,15 @@ _CRC_AT = 1 + 8 + 8 + 8 + 8
 
 MCAP_FIX = (
     "record chunked MCAP with CRCs: `ros2 bag record -s mcap --storage-config-file mcap_writer_options.yaml` "
-    "with `noCRC: false` and `noChunking: false` in that file (the plugin's defaults; the `fastwrite` and "
-    "`zstd_fast` presets turn CRCs off, `zstd_small` keeps them), or re-write existing bags with "
+    "with `noCRC: false` and `noChunking: false` in that file (set them explicitly: the `fastwrite` and "
+    "`zstd_fast` presets and some plugin versions write no CRCs; `zstd_small` keeps them), or re-write existing bags with "
     "`ros2 bag convert` and `storage_preset_profile: zstd_small`."
 )
 _NONE = {
     Storage.SQLITE3: Checksums(
         False,
         "rosbag2 SQLite (.db3) bags carry no checksums",
-        "record with `ros2 bag record -s mcap` (chunk CRCs are on by default), or re-write existing bags "
+        "record with `ros2 bag record -s mcap` and `noCRC: false` in its `--storage-config-file`, or re-write existing bags "
         "with `ros2 bag convert` and `storage_id: mcap`, `storage_preset_profile: zstd_small`.",
     ),
     Storage.ROS1: Checksums(

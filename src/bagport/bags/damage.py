@@ -20,7 +20,7 @@ from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
-__all__ = ["STORAGE_ERRORS", "checked_records", "damaged_bag"]
+__all__ = ["STORAGE_ERRORS", "checked_records", "damaged_bag", "short_read"]
 
 STORAGE_ERRORS = (
     AnyReaderError,
@@ -35,11 +35,15 @@ STORAGE_ERRORS = (
     EOFError,
     AssertionError,  # rosbags checks a ROS 1 record against its index with assert
     RuntimeError,  # lz4 decompression
+    TypeError,  # a damaged QoS or metadata string parsed as the wrong shape
+    OverflowError,  # a damaged length seeks past what the OS can address
+    MemoryError,  # a damaged length asks for an impossible read (fails before allocating)
     struct.error,
     zstd.ZstdError,
 )
 """What rosbags and the storage libraries under it raise on a damaged or truncated bag."""
 
+_REINDEX_SHORT = "reindex it (`ros2 bag reindex` / `rosbag reindex`)."
 _REINDEX = "reindex the bag (`rosbag reindex` for ROS 1, `ros2 bag reindex` for rosbag2)."
 _FIXES = {
     Storage.MCAP: "copy the file again from the robot or a backup (its bytes changed after recording); "
@@ -83,6 +87,21 @@ def damaged_bag(
     topic = topics[0] if len(topics) == 1 else last[0] if last is not None and not topics else None
     index_only = damage is None and "index" in str(err).lower()
     return BagReadError(what, uri=uri, topic=topic, fix=_REINDEX if index_only else _FIXES[storage])
+
+
+def short_read(
+    what: str, *, uri: str, topic: str, storage: Storage, files: Iterable[BagFile]
+) -> BagReadError:
+    """Fewer messages than the index promises: damage when the files show some, else a truncated bag
+    or a stale index."""
+    damage = locate_damage(storage, list(files))
+    if damage is not None:
+        return BagReadError(
+            f"{what}; damage found in {damage.describe()}", uri=uri, topic=topic, fix=_FIXES[storage]
+        )
+    return BagReadError(
+        what, uri=uri, topic=topic, fix=f"the bag is truncated or its index is stale: {_REINDEX_SHORT}"
+    )
 
 
 def checked_records(

@@ -34,6 +34,8 @@ __all__ = ["Damage", "locate_damage"]
 _U32 = struct.Struct("<I")
 _U64 = struct.Struct("<Q")
 _CHUNK_HEAD = struct.Struct("<QQQI")
+MAX_RECORD_BYTES = 1 << 30
+"""A record (chunk) claiming more is damaged: nothing larger is read into memory while locating."""
 _DECOMPRESS: dict[str, Callable[[bytes], bytes]] = {
     "": lambda data: data,
     "none": lambda data: data,
@@ -133,7 +135,12 @@ def _locate_mcap(path: Path | RemotePath) -> Damage | None:
         channels = {cid: channel.topic for cid, channel in summary.channels.items()}
         for index in sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset):
             handle.seek(index.chunk_start_offset)
-            problem = _mcap_chunk_problem(handle.read(index.chunk_length), channels)
+            if index.chunk_length > MAX_RECORD_BYTES:
+                problem: str | None = (
+                    f"the chunk index gives an implausible length ({index.chunk_length} bytes)"
+                )
+            else:
+                problem = _mcap_chunk_problem(handle.read(index.chunk_length), channels)
             if problem is not None:
                 topics = sorted({channels.get(cid, f"channel {cid}") for cid in index.message_index_offsets})
                 return Damage(path.name, index.chunk_start_offset, problem, tuple(topics))
@@ -147,15 +154,94 @@ def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
     try:
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:
             page_size = int(db.execute("PRAGMA page_size").fetchone()[0])
-            rows = [str(row[0]) for row in db.execute("PRAGMA integrity_check(5)")]
+            roots = [(str(n), int(r)) for n, r in db.execute("SELECT name, rootpage FROM sqlite_master") if r]
+            try:
+                rows = [str(row[0]) for row in db.execute("PRAGMA integrity_check(5)")]
+            except sqlite3.DatabaseError as err:
+                return _walk_btrees(path, page_size, roots) or Damage(path.name, None, f"SQLite: {err}")
     except sqlite3.Error as err:
-        return Damage(path.name, 0, f"SQLite cannot read its header or schema ({err})")
+        return Damage(path.name, None, f"SQLite cannot read its header or schema ({err})")
     if rows == ["ok"]:
-        return None
+        return _sqlite_row_types(path, uri)
     pages = re.findall(r"page (\d+)", " ".join(rows))
-    offset = (int(pages[0]) - 1) * page_size if pages else None
     found = "; ".join(" ".join(row.split()) for row in rows[:3])
+    if not pages:  # a bare "malformed": the rows or the b-trees may still say where
+        located = _sqlite_row_types(path, uri) or _walk_btrees(path, page_size, roots)
+        if located is not None:
+            return located
+    offset = (int(pages[0]) - 1) * page_size if pages else None
     return Damage(path.name, offset, f"SQLite's integrity check finds damaged pages ({found})")
+
+
+_ROWS = (
+    "SELECT messages.id, topics.name, typeof(messages.timestamp), typeof(messages.data) FROM messages "
+    "LEFT JOIN topics ON topics.id = messages.topic_id ORDER BY messages.id"
+)
+
+
+def _sqlite_row_types(path: Path, uri: str) -> Damage | None:
+    """The first message row that cannot be read, whose columns are of the wrong type or whose topic is
+    missing: a bit flip in a record header that SQLite's structural check does not place."""
+    last: tuple[int, str] | None = None
+    try:
+        with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:
+            for rowid, topic, stamp_type, data_type in db.execute(_ROWS):
+                if topic is None:
+                    return Damage(
+                        path.name, None, f"message row {rowid} names a topic the topics table lacks"
+                    )
+                if (stamp_type, data_type) != ("integer", "blob"):
+                    return Damage(
+                        path.name,
+                        None,
+                        f"message row {rowid} holds a {stamp_type} timestamp and a {data_type} payload "
+                        "(an integer and a blob belong there)",
+                        (str(topic),),
+                    )
+                last = (int(rowid), str(topic))
+    except sqlite3.Error as err:
+        after = f" after row {last[0]} (on {last[1]})" if last is not None else ""
+        return Damage(path.name, None, f"the message row{after} cannot be read ({err})")
+    return None
+
+
+_LEAF, _INTERIOR = {0x0A, 0x0D}, {0x02, 0x05}
+
+
+def _walk_btrees(path: Path, page_size: int, roots: list[tuple[str, int]]) -> Damage | None:
+    """The first b-tree page whose header is damaged (when SQLite's own check gives up), walking each
+    table and index from its root page."""
+    pages = path.stat().st_size // page_size
+    with path.open("rb") as handle:
+        for name, root in roots:
+            todo, seen = [root], set()
+            while todo:
+                page = todo.pop()
+                if page in seen:
+                    continue
+                seen.add(page)
+                offset = (page - 1) * page_size
+                if not 1 <= page <= pages:
+                    return Damage(
+                        path.name, None, f"b-tree of {name} points at page {page}, past the file's end"
+                    )
+                handle.seek(offset)
+                buf = handle.read(page_size)
+                head = 100 if page == 1 else 0
+                kind, cells = buf[head], int.from_bytes(buf[head + 3 : head + 5], "big")
+                size = 8 if kind in _LEAF else 12
+                if kind not in _LEAF | _INTERIOR or head + size + 2 * cells > page_size:
+                    return Damage(path.name, offset, f"page {page} of {name} has a damaged b-tree header")
+                if kind in _INTERIOR:
+                    pointers = [
+                        int.from_bytes(buf[head + 12 + 2 * i : head + 14 + 2 * i], "big")
+                        for i in range(cells)
+                    ]
+                    if any(not size <= p < page_size - 4 for p in pointers):
+                        return Damage(path.name, offset, f"page {page} of {name} has damaged cell pointers")
+                    todo += [int.from_bytes(buf[p : p + 4], "big") for p in pointers]
+                    todo.append(int.from_bytes(buf[head + 8 : head + 12], "big"))
+    return None
 
 
 def _ros1_header(buf: bytes) -> dict[str, bytes]:
@@ -188,7 +274,7 @@ def _ros1_record(read: Callable[[int], bytes], left: int) -> tuple[dict[str, byt
         raise _BadRecordError(f"header length {header_len} runs past the end")
     header = _ros1_header(read(header_len))
     (data_len,) = _U32.unpack(read(4))
-    if header_len + 8 + data_len > left:
+    if header_len + 8 + data_len > left or data_len > MAX_RECORD_BYTES:
         raise _BadRecordError(f"data length {data_len} runs past the end")
     return header, read(data_len)
 

@@ -19,7 +19,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags.bundled import BUNDLED_DEFINITIONS
 from bagport.bags.checksums import bag_checksums
-from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag
+from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag, short_read
 from bagport.bags.detect import detect_storage
 from bagport.bags.indexcount import window_counts
 from bagport.bags.layout import BagPath, plan_reads
@@ -289,12 +289,9 @@ class RosbagsReader:
         for topic, count in yielded.items():
             promised = promises.get(topic, 0)
             if count < promised:
-                raise BagReadError(
-                    f"yielded {count} messages on {topic}{window}, its index promises {promised}",
-                    uri=self._uri,
-                    topic=topic,
-                    fix="the bag is truncated or its index is stale: reindex it "
-                    "(`ros2 bag reindex` / `rosbag reindex`).",
+                what = f"yielded {count} messages on {topic}{window}, its index promises {promised}"
+                raise short_read(
+                    what, uri=self._uri, topic=topic, storage=self._info.storage, files=self._data_files
                 )
 
     def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]:

@@ -1,10 +1,11 @@
 """Camera topics recorded as a compressed video stream: ``foxglove_msgs/CompressedVideo`` and
 ``ffmpeg_image_transport_msgs/FFMPEGPacket``, one encoded access unit per message.
 
-The codec comes from the message (``format``: ``h264``/``h265``; ``encoding``: the ffmpeg encoder
-that wrote it, e.g. ``libx264``, ``hevc_nvenc``); parameter sets (SPS/PPS/VPS) come in-band from
-the stream (Annex B, as both transports publish it). A stream can be decoded only from a key frame
-(H.264 IDR; H.265 IDR or BLA): :class:`KeyframeGate` drops the packets before the first one.
+The codec comes from the message (``format``: ``h264``, ``h265``, ``vp9``, ``av1``; ``encoding``: the
+ffmpeg encoder that wrote it, e.g. ``libx264``, ``hevc_nvenc``); parameter sets (SPS/PPS/VPS, AV1's
+sequence header) come in-band from the stream (Annex B / OBUs, as both transports publish them). A
+stream can be decoded only from a key frame (:mod:`bagport.decode.keyframes`): :class:`KeyframeGate`
+drops the packets before the first one.
 :class:`StreamDecoder` is one PyAV decoder: every packet goes in with a ``pts`` the caller chooses
 (its sample index) and comes out, after the decoder's delay and B-frame reordering, as an RGB frame
 with that ``pts``, so each frame keeps the stamp of the message that carried it.
@@ -12,13 +13,13 @@ with that ``pts``, so each frame keeps the stamp of the message that carried it.
 
 from __future__ import annotations
 
-from collections.abc import Iterator
 from typing import Any
 
 import av
 import numpy as np
 import numpy.typing as npt
 
+from bagport.decode.keyframes import Codec, is_key_packet
 from bagport.errors import DecodeError
 from bagport.msgtypes import RosType
 
@@ -33,19 +34,20 @@ __all__ = [
 ]
 
 Rgb = npt.NDArray[np.uint8]
-_H264, _HEVC = "h264", "hevc"
-_START = b"\x00\x00\x01"
-_H264_IDR = 5
-_HEVC_KEYS = frozenset({16, 17, 18, 19, 20})  # BLA_W_LP, BLA_W_RADL, BLA_N_LP, IDR_W_RADL, IDR_N_LP
-_FFMPEG_KEY_FLAG = 1
+_DECODERS = {Codec.H264: "h264", Codec.HEVC: "hevc", Codec.VP9: "vp9", Codec.AV1: "libdav1d"}
 
 
-def _codec(name: str) -> str | None:
+def _codec(name: str) -> Codec | None:
+    """``h264``/``h265`` (CompressedVideo ``format``) or an FFmpeg encoder name (FFMPEGPacket ``encoding``)."""
     text = name.lower()
-    if "264" in text or "avc" in text:
-        return _H264
-    if "265" in text or "hevc" in text:
-        return _HEVC
+    for codec, words in (
+        (Codec.H264, ("264", "avc")),
+        (Codec.HEVC, ("265", "hevc")),
+        (Codec.VP9, ("vp9",)),
+        (Codec.AV1, ("av1", "av01")),
+    ):
+        if any(word in text for word in words):
+            return codec
     return None
 
 
@@ -54,7 +56,7 @@ class VideoPacket:
 
     __slots__ = ("codec", "data")
 
-    def __init__(self, codec: str, data: bytes) -> None:
+    def __init__(self, codec: Codec, data: bytes) -> None:
         self.codec = codec
         self.data = data
 
@@ -66,25 +68,16 @@ def video_packet(msg: Any, msgtype: str) -> VideoPacket:
     codec = _codec(name)
     if codec is None:
         raise DecodeError(
-            f"video stream {field} {name!r} is not a codec bagport decodes (H.264 or H.265)",
-            fix="re-encode the camera as H.264/H.265, or leave the topic out of the contract.",
+            f"video stream {field} {name!r} is not a codec bagport decodes (H.264, H.265, VP9, AV1)",
+            fix="re-encode the camera in one of them, or leave the topic out of the contract.",
         )
     data = msg.data.tobytes() if isinstance(msg.data, np.ndarray) else bytes(msg.data)
     return VideoPacket(codec, data)
 
 
-def _nal_types(data: bytes, codec: str) -> Iterator[int]:
-    at = data.find(_START)
-    while at >= 0 and at + 3 < len(data):
-        header = data[at + 3]
-        yield header & 0x1F if codec == _H264 else (header >> 1) & 0x3F
-        at = data.find(_START, at + 3)
-
-
 def is_keyframe(packet: VideoPacket) -> bool:
-    """Whether decoding can start at this packet (it holds an H.264 IDR / H.265 IDR or BLA picture)."""
-    keys = {_H264_IDR} if packet.codec == _H264 else _HEVC_KEYS
-    return any(kind in keys for kind in _nal_types(packet.data, packet.codec))
+    """Whether decoding can start at this packet (see :mod:`bagport.decode.keyframes`)."""
+    return is_key_packet(packet.codec, packet.data)
 
 
 class KeyframeGate:
@@ -108,9 +101,9 @@ class StreamDecoder:
     Memory is the decoder's own: its reference frames and reorder delay, whatever the stream's length.
     """
 
-    def __init__(self, codec: str) -> None:
+    def __init__(self, codec: Codec) -> None:
         self.codec = codec
-        self._context: Any = av.CodecContext.create(codec, "r")
+        self._context: Any = av.CodecContext.create(_DECODERS[codec], "r")
 
     def decode(self, packet: VideoPacket, pts: int) -> list[tuple[int, Any]]:
         """Frames the decoder gives back after ``packet``: ``(pts, av.VideoFrame)``."""

@@ -188,7 +188,7 @@ def scan_timeline(
             raise AlignmentError(
                 f"none of the {gate.skipped} video packets on {topic}"
                 + ("" if window_ns is None else " in the episode window or before it")
-                + " is a key frame (H.264 IDR, H.265 IDR/BLA), so no frame can be decoded",
+                + " is a key frame, so no frame can be decoded",
                 uri=reader.info.uri,
                 topic=topic,
                 fix="record the camera with periodic key frames (the encoder's GOP / keyint setting), "

@@ -22,6 +22,7 @@ import numpy.typing as npt
 
 from bagport.bags import BagMessage, BagReader
 from bagport.decode import resize_image
+from bagport.decode.keyframes import Codec
 from bagport.decode.video import KeyframeGate, StreamDecoder, frame_rgb, is_keyframe, video_packet
 from bagport.errors import DecodeError
 from bagport.qa import CheckResult
@@ -79,7 +80,7 @@ class VideoFeed:
             if gate.admit(packet):
                 self._collect(self._decoder_for(packet.codec).decode(packet, -number))
 
-    def _decoder_for(self, codec: str) -> StreamDecoder:
+    def _decoder_for(self, codec: Codec) -> StreamDecoder:
         if self._decoder is None:
             self._decoder = StreamDecoder(codec)
         return self._decoder

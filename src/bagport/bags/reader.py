@@ -155,10 +155,7 @@ class RosbagsReader:
             message_count=message_count,
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
             custom_data=_custom_data(path),
-            warnings=(
-                *plan.warnings,
-                *(f"type {t} cannot be loaded: {why}" for t, why in sorted(self._reader.unloadable.items())),
-            ),
+            warnings=(*plan.warnings, *self._reader.warnings()),
         )
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
         self._lacking = lacking
@@ -223,7 +220,7 @@ class RosbagsReader:
         conns = self._connections(topics)
         if not conns:
             return
-        names = {id(c): (global_topic(c.topic), normalize_msgtype(c.msgtype)) for c in conns}
+        names = {(c.topic, c.msgtype): (global_topic(c.topic), normalize_msgtype(c.msgtype)) for c in conns}
         for topic, msgtype in names.values():
             if msgtype in self._lacking:
                 raise undefined_type_error(self._uri, topic, msgtype, self._lacking[msgtype])
@@ -233,7 +230,7 @@ class RosbagsReader:
         try:
             for conn, log_ns, raw in self._reader.messages(connections=conns, start=start_ns, stop=stop_ns):
                 payload = zstd.decompress(raw) if self._decompress else raw
-                topic, msgtype = names[id(conn)]
+                topic, msgtype = names[conn.topic, conn.msgtype]
                 yielded[topic] += 1
                 yield BagMessage(topic, msgtype, int(log_ns), payload, deserialize, layouts[msgtype])
         except _ROSBAGS_ERRORS as err:

@@ -142,3 +142,7 @@ class TolerantAnyReader(AnyReader):
                 self.unloadable[msgtype] = f"its definition hashes to {have}, the bag records {digest}"
         self.connections = connections
         self.typestore = typestore
+
+    def warnings(self) -> list[str]:
+        """What ``inspect`` should say about the bag's types."""
+        return [f"type {t} cannot be loaded: {why}" for t, why in sorted(self.unloadable.items())]

@@ -164,10 +164,7 @@ class RosbagsReader:
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
             custom_data=_custom_data(path),
             checksums=bag_checksums(storage, plan.data_files),
-            warnings=(
-                *plan.warnings,
-                *(f"type {t} cannot be loaded: {why}" for t, why in sorted(self._reader.unloadable.items())),
-            ),
+            warnings=(*plan.warnings, *self._reader.warnings()),
         )
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
         self._lacking = lacking
@@ -234,7 +231,7 @@ class RosbagsReader:
         conns = self._connections(topics)
         if not conns:
             return
-        names = {id(c): (global_topic(c.topic), normalize_msgtype(c.msgtype)) for c in conns}
+        names = {(c.topic, c.msgtype): (global_topic(c.topic), normalize_msgtype(c.msgtype)) for c in conns}
         for topic, msgtype in names.values():
             if msgtype in self._lacking:
                 raise undefined_type_error(self._uri, topic, msgtype, self._lacking[msgtype])
@@ -248,7 +245,7 @@ class RosbagsReader:
             files=self._data_files,
         )
         for conn, log_ns, raw in records:
-            topic, msgtype = names[id(conn)]
+            topic, msgtype = names[conn.topic, conn.msgtype]
             try:
                 payload = zstd.decompress(raw) if self._decompress else raw
             except zstd.ZstdError as err:

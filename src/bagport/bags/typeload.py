@@ -127,6 +127,10 @@ class TolerantAnyReader(AnyReader):
         self.connections = connections
         self.typestore = typestore
 
+    def warnings(self) -> list[str]:
+        """What ``inspect`` should say about the bag's types."""
+        return [f"type {t} cannot be loaded: {why}" for t, why in sorted(self.unloadable.items())]
+
 
 @functools.lru_cache(maxsize=16)
 def _typestore(

@@ -143,10 +143,12 @@ def _convert(args: argparse.Namespace) -> int:
         config = _convert_config(args)
     except pydantic.ValidationError as err:
         raise BagportError(f"invalid options: {_option_errors(err)}") from err
-    if args.push_to_hub and (args.repo_id is None or "lerobot" not in config.formats):
+    if args.push_to_hub and (
+        args.repo_id is None or "lerobot" not in config.formats or "://" in config.output
+    ):
         raise BagportError(
-            "--push-to-hub publishes the LeRobot dataset under --repo-id: give --repo-id ORG/NAME and keep lerobot "
-            "in --format"
+            "--push-to-hub publishes the local LeRobot dataset under --repo-id: give --repo-id ORG/NAME, keep "
+            "lerobot in --format and a local --output (push one on an object store from a local copy)"
         )
     if args.push_to_hub:
         hf_token()  # before converting, not after

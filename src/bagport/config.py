@@ -114,6 +114,10 @@ class ConvertConfig(BaseModel):
             raise ValueError(
                 "append adds to a LeRobot dataset only: leave --format out, or convert into a new --output"
             )
+        if self.hdf5_jpeg_quality is not None and "hdf5" not in self.formats:
+            raise ValueError(
+                "hdf5_jpeg_quality (--hdf5-jpeg) applies to --format hdf5 only: add hdf5, or leave it out"
+            )
         return self
 
     def format_outputs(self) -> dict[str, str]:

@@ -37,9 +37,10 @@ def test_without_lerobot_the_first_format_goes_to_output() -> None:
         ({"formats": ["hdf5", "hdf5"]}, "give each of lerobot, hdf5, robodm at most once"),
         ({"formats": ["parquet"]}, "Input should be 'lerobot', 'hdf5' or 'robodm'"),
         ({"formats": ["lerobot", "hdf5"], "append": True}, "append adds to a LeRobot dataset only"),
-        ({"hdf5_jpeg_quality": 0}, "greater than or equal to 1"),
+        ({"hdf5_jpeg_quality": 0, "formats": ["hdf5"]}, "greater than or equal to 1"),
+        ({"hdf5_jpeg_quality": 50}, "applies to --format hdf5 only"),
     ],
-    ids=["none", "twice", "unknown", "append", "jpeg-quality"],
+    ids=["none", "twice", "unknown", "append", "jpeg-quality", "jpeg-without-hdf5"],
 )
 def test_refused_formats(values: dict[str, object], message: str) -> None:
     with pytest.raises(pydantic.ValidationError, match=message):

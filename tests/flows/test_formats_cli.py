@@ -130,8 +130,12 @@ def test_a_rerun_rebuilds_every_output_from_staging_without_reading_bags(
     assert len(staged) == 2
     (root / "ds.hdf5" / "episode_1.hdf5").unlink()  # as a partial output from an interrupted run would be
     (root / "ds.robodm" / "episode_0.vla").unlink()
+    killed_build = root / ".ds.hdf5.tmp-0badcafe"  # what a run killed while building the HDF5 output leaves
+    killed_build.mkdir()
+    (killed_build / "episode_0.hdf5").write_bytes(b"partial")
     assert _convert(root, "--overwrite") == 1
     assert _staged(root) == staged  # the staged episodes were reused, none converted again
     with h5py.File(root / "ds.hdf5" / "episode_1.hdf5", "r") as f:
         assert f["action"].shape[0] == sum(fr.episode_index == 1 for fr in frames)
     assert (root / "ds.robodm" / "episode_0.vla").is_file()
+    assert not killed_build.exists()  # removed by the re-run's recovery, never swapped in

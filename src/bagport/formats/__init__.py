@@ -8,6 +8,7 @@ does (:mod:`bagport.formats.publish`) and writes ``meta/info.json`` and ``meta/p
 
 from __future__ import annotations
 
+import importlib.util
 from collections.abc import Sequence
 from typing import Any
 
@@ -21,10 +22,19 @@ __all__ = ["check_format_outputs", "write_formats"]
 
 
 def check_format_outputs(config: ConvertConfig) -> None:
-    """Before any work: every output but the LeRobot one is free (or ``overwrite``), a crashed
-    write into it undone."""
-    for fmt, output in config.format_outputs().items():
-        if fmt != "lerobot" and output != config.output:
+    """Before any work: each format's package is installed, every output but the LeRobot one is free
+    (or ``overwrite``), a crashed write into it undone."""
+    for fmt in config.formats:
+        if fmt == "hdf5" and importlib.util.find_spec("h5py") is None:
+            from bagport.formats.hdf5 import Hdf5MissingError  # noqa: PLC0415
+
+            raise Hdf5MissingError("no module named h5py")
+        if fmt == "robodm" and importlib.util.find_spec("robodm") is None:
+            from bagport.formats.robodm import RobodmMissingError  # noqa: PLC0415
+
+            raise RobodmMissingError("no module named robodm")
+    for name, output in config.format_outputs().items():
+        if name != "lerobot" and output != config.output:
             check_output_free(output, overwrite=config.overwrite)
 
 

@@ -72,12 +72,13 @@ def iter_tick_batches(summary: EpisodeSummary) -> Iterator[npt.NDArray[np.int64]
             batch_size=BATCH_ROWS * 4, columns=["frame_index", "tick_ns"]
         ):
             frames = batch.column("frame_index").to_numpy()
+            if frames.size == 0:
+                continue
             ticks = batch.column("tick_ns").to_numpy()
             first = np.ones(frames.size, dtype=bool)
             first[1:] = frames[1:] != frames[:-1]
-            first[0] = frames[0] != last if frames.size else False
-            if frames.size:
-                last = int(frames[-1])
+            first[0] = frames[0] != last
+            last = int(frames[-1])
             yield ticks[first].astype(np.int64)
 
 
@@ -102,7 +103,7 @@ def iter_video_frames(summary: EpisodeSummary, key: str) -> Iterator[npt.NDArray
         ) from err
     if count != summary.frames:
         raise DatasetWriteError(
-            f"staged clip {uri} of {summary.bag_uri} holds {count} frames, the episode {summary.frames}. "
+            f"staged clip {uri} of {summary.bag_uri} holds {count} frames, the episode has {summary.frames}. "
             f"Fix: remove the staged episode {summary.dir_uri} and convert again."
         )
 

@@ -152,45 +152,63 @@ def _write_episode(
                 "features": json.dumps(layout),
             }
         )
-        rows = max(1, min(frames, VECTOR_CHUNK_ROWS))
-        columns = {
-            "timestamp": f.create_dataset("timestamp", (frames,), "float32", chunks=(rows,)),
-            "frame_index": f.create_dataset("frame_index", (frames,), "int64", chunks=(rows,)),
-            "task": f.create_dataset("task", (frames,), h5py.string_dtype(), chunks=(rows,)),
-        }
-        vectors = {
-            feature.key: f.create_dataset(
-                hdf5_path(feature.key), (frames, *feature.shape), feature.dtype, chunks=(rows, *feature.shape)
-            )
-            for feature in summary.features
-            if feature.video_info is None
-        }
-        for key, dataset in vectors.items():
-            if layout[hdf5_path(key)]["names"] is not None:
-                dataset.attrs["names"] = layout[hdf5_path(key)]["names"]
-        for batch in iter_vector_batches(summary):
-            end = batch.start + batch.timestamp.size
-            columns["timestamp"][batch.start : end] = batch.timestamp
-            columns["frame_index"][batch.start : end] = batch.frame_index
-            columns["task"][batch.start : end] = batch.task
-            for key, dataset in vectors.items():
-                dataset[batch.start : end] = batch.values[key]
-        ticks = f.create_dataset("tick_ns", (frames,), "int64", chunks=(rows,))
-        done = 0
-        for tick_batch in iter_tick_batches(summary):
-            ticks[done : done + tick_batch.size] = tick_batch
-            done += tick_batch.size
+        _write_vectors(f, summary, layout)
+        _write_ticks(f, summary)
         cameras = [feature for feature in summary.features if feature.video_info is not None]
-        lengths = (
-            f.create_dataset("compress_len", (len(cameras), frames), "float32") if jpeg_quality else None
-        )
+        if jpeg_quality is None:
+            for camera in cameras:
+                _write_raw(f, hdf5_path(camera.key), summary, camera)
+            return
+        lengths = f.create_dataset("compress_len", (len(cameras), frames), "float32")
         for number, camera in enumerate(cameras):
-            target = hdf5_path(camera.key)
-            if jpeg_quality is None:
-                _write_raw(f, target, summary, camera)
-            else:
-                assert lengths is not None  # created with jpeg_quality
-                _write_jpeg(f, target, summary, camera, jpeg_quality, lengths, number)
+            _write_jpeg(f, hdf5_path(camera.key), summary, camera, jpeg_quality, lengths, number)
+
+
+def _chunk_rows(frames: int) -> int:
+    return max(1, min(frames, VECTOR_CHUNK_ROWS))
+
+
+def _write_vectors(f: Any, summary: EpisodeSummary, layout: dict[str, Any]) -> None:
+    """``/timestamp``, ``/frame_index``, ``/task`` and every vector feature, batch by batch."""
+    import h5py  # noqa: PLC0415 - an optional extra
+
+    frames, rows = summary.frames, _chunk_rows(summary.frames)
+    columns = {
+        "timestamp": f.create_dataset("timestamp", (frames,), "float32", chunks=(rows,)),
+        "frame_index": f.create_dataset("frame_index", (frames,), "int64", chunks=(rows,)),
+        "task": f.create_dataset("task", (frames,), h5py.string_dtype(), chunks=(rows,)),
+    }
+    vectors = {
+        feature.key: f.create_dataset(
+            hdf5_path(feature.key), (frames, *feature.shape), feature.dtype, chunks=(rows, *feature.shape)
+        )
+        for feature in summary.features
+        if feature.video_info is None
+    }
+    for key, dataset in vectors.items():
+        if layout[hdf5_path(key)]["names"] is not None:
+            dataset.attrs["names"] = layout[hdf5_path(key)]["names"]
+    for batch in iter_vector_batches(summary):
+        end = batch.start + batch.timestamp.size
+        columns["timestamp"][batch.start : end] = batch.timestamp
+        columns["frame_index"][batch.start : end] = batch.frame_index
+        columns["task"][batch.start : end] = batch.task
+        for key, dataset in vectors.items():
+            dataset[batch.start : end] = batch.values[key]
+
+
+def _write_ticks(f: Any, summary: EpisodeSummary) -> None:
+    """``/tick_ns``: each frame's original time in the bag's log time."""
+    ticks = f.create_dataset("tick_ns", (summary.frames,), "int64", chunks=(_chunk_rows(summary.frames),))
+    done = 0
+    for batch in iter_tick_batches(summary):
+        ticks[done : done + batch.size] = batch
+        done += batch.size
+    if done != summary.frames:
+        raise DatasetWriteError(
+            f"staged provenance of {summary.bag_uri} times {done} frames, the episode has {summary.frames}. Fix: "
+            f"remove the staged episode {summary.dir_uri} and convert again."
+        )
 
 
 def _write_raw(f: Any, target: str, summary: EpisodeSummary, camera: StagedFeature) -> None:

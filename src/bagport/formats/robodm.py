@@ -4,8 +4,9 @@
 and stamped with the frame's original time in the bag's log time (ns): every contract key under its own
 name (``observation.state``, ``action``, ``observation.images.<camera>`` as RGB ``HxWx3`` uint8 decoded
 from the staged clip), ``timestamp`` (LeRobot's, s), ``frame_index``, ``tick_ns`` (the original time
-again, as a value) and ``task``; and once, at the first frame, ``episode``: a JSON text with the
-episode's provenance (bag, window, label and note, manifest metadata, QA), fps, robot type and tasks.
+again, as a value), ``task`` and ``episode``: at the first frame a JSON text with the episode's
+provenance (bag, window, label and note, manifest metadata, QA), fps, robot type and tasks, an empty text
+at the others (a stream with one value only would make the muxer buffer every other stream).
 
 Images are stored with Robo-DM's ``rawvideo`` codec (lossless, uncompressed): ``robodm`` 0.1.0 tests
 its video codecs with ``CodecContext.close()``, which PyAV 14 removed, so with the PyAV bagport needs
@@ -131,8 +132,9 @@ def _write_trajectory(
             def add(name: str, value: Any, stamp_ns: int = stamp_ns) -> None:
                 writer.add(name, value, timestamp=stamp_ns, time_unit="ns")
 
-            if frame_index == 0:
-                add("episode", json.dumps(episode, default=str))
+            # one value per frame: a stream with a single packet holds back the muxer's interleaving, which
+            # then buffers every other stream's packets (up to FFmpeg's 10 s), so memory would grow
+            add("episode", json.dumps(episode, default=str) if frame_index == 0 else "")
             add("timestamp", np.float32(timestamp))
             add("frame_index", np.int64(frame_index))
             add("tick_ns", np.int64(stamp_ns))

@@ -18,7 +18,7 @@ from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
-__all__ = ["TolerantAnyReader", "is_service_event"]
+__all__ = ["TolerantAnyReader", "is_service_event", "one_line"]
 
 _IDL_SEPARATOR = "=" * 80 + "\n"
 _SERVICE_EVENT = re.compile(r"(/_service_event$)|(/srv/\w+_Event$)")
@@ -42,6 +42,16 @@ def _types_of(connection: Connection) -> dict[str, Any]:
     return dict(get_types_from_idl(data))
 
 
+def one_line(err: Exception, limit: int = 200) -> str:
+    """A type-system error on one line: rosbags' parser dumps the whole definition over many lines
+    (``Could not parse:`` / the text / the offset / the rest); keep where it stopped."""
+    lines = [line.strip() for line in str(err).splitlines() if line.strip()]
+    if len(lines) >= 4 and lines[0].startswith("Could not parse") and lines[2].isdigit():
+        return f"syntax error at character {lines[2]}, near {lines[3]!r}"
+    text = " ".join(lines)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
+
+
 class TolerantAnyReader(AnyReader):
     """``AnyReader`` whose ``unloadable`` maps each type it could not load to the reason."""
 
@@ -62,7 +72,9 @@ class TolerantAnyReader(AnyReader):
             try:
                 types.update(_types_of(connection))
             except (TypesysError, ValueError, KeyError, IndexError) as err:
-                self.unloadable[connection.msgtype] = f"its embedded definition does not parse ({err})"
+                self.unloadable[connection.msgtype] = (
+                    f"its embedded definition does not parse ({one_line(err)})"
+                )
                 continue
             if connection.digest:
                 digests[connection.msgtype] = connection.digest
@@ -76,7 +88,7 @@ class TolerantAnyReader(AnyReader):
             try:
                 have = typestore.hash_rihs01(msgtype) if self.is2 else typestore.generate_msgdef(msgtype)[1]
             except (TypesysError, ValueError, KeyError) as err:
-                self.unloadable[msgtype] = f"its definition cannot be hashed ({err})"
+                self.unloadable[msgtype] = f"its definition cannot be hashed ({one_line(err)})"
                 continue
             if have != digest:
                 self.unloadable[msgtype] = f"its definition hashes to {have}, the bag records {digest}"

@@ -44,6 +44,8 @@ class Progress:
         """More episodes to convert (a bag was split into its episodes)."""
         self._total += episodes
         update_progress_artifact(self._id, self._percent(), description=self._text())
+        for listener in LISTENERS:  # the bar shows 0/N as soon as the episodes are known
+            listener(self._done, self._total)
 
     def _percent(self) -> float:
         return 100.0 * self._done / max(self._total, 1)

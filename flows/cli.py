@@ -81,6 +81,8 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     from flows.local_server import launch, take_launched  # noqa: PLC0415 - standard library only
 
     launch()  # the temporary Prefect server boots while the imports below run
+    if not args.quiet and sys.stderr.isatty():  # something from the first second (start-up takes 5-13 s)
+        print("starting: planning ...", end="", file=sys.stderr, flush=True)  # the bar overwrites it
     try:
         return _convert(args)
     finally:

@@ -225,6 +225,11 @@ async def _scenario(env: dict[str, str], tmp: Path) -> dict[str, Any]:
     return story
 
 
+def _run_order(path: str) -> tuple[bool, str]:
+    """``run.json`` (the first run), then ``run-001.json``, ``run-002.json``..."""
+    return not path.endswith("/run.json"), path
+
+
 def _wait_for_text(page: Page, url: str, expected: list[str], shot: Path, timeout_s: float = 60) -> str:
     """Open ``url`` and wait until the page's text holds every expected string; screenshot it."""
     if url:
@@ -323,7 +328,8 @@ def test_the_stack_runs_scheduled_ingestion_and_reconvert(stack: dict[str, str],
     assert story["fourth"][0].endswith(": +0 episode(s)")  # the unchanged broken bag is not retried
     assert story["re2"][1] == "Completed"
     records = [
-        json.loads(fs.cat(p)) for p in sorted(fs.glob("fleet/datasets/fleet/meta/provenance/run*.json"))
+        json.loads(fs.cat(p))
+        for p in sorted(fs.glob("fleet/datasets/fleet/meta/provenance/run*.json"), key=_run_order)
     ]
     assert [[Path(u).name for u in r["manifest"]["converted_now"]] for r in records] == [
         ["day1_a", "day1_b"],

@@ -38,7 +38,9 @@ class Progress:
         self._id = artifact_id
 
     def _text(self) -> str:
-        return f"{self._done} of {self._total} episode(s) converted"
+        return (
+            f"{self._done} of {self._total} episode(s) finished"  # failed ones too: the summary tells which
+        )
 
     def add(self, episodes: int) -> None:
         """More episodes to convert (a bag was split into its episodes)."""

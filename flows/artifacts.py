@@ -41,13 +41,16 @@ class Progress:
 
     def _text(self) -> str:
         reused = f"; {self._reused} reused from the staging store" if self._reused else ""
-        return f"{self._done} of {self._total} episode(s) converted{reused}"
+        # failed ones count as finished too: the summary tells which
+        return f"{self._done} of {self._total} episode(s) finished{reused}"
 
     def add(self, episodes: int, reused: int = 0) -> None:
         """More episodes to convert (a bag was split into its episodes), and more found staged already."""
         self._total += episodes
         self._reused += reused
         update_progress_artifact(self._id, self._percent(), description=self._text())
+        for listener in LISTENERS:  # the bar shows 0/N as soon as the episodes are known
+            listener(self._done, self._total)
 
     def _percent(self) -> float:
         return 100.0 * self._done / self._total if self._total else 100.0  # nothing to convert: done

@@ -83,6 +83,8 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     from flows.local_server import launch, take_launched  # noqa: PLC0415 - standard library only
 
     launch()  # the temporary Prefect server boots while the imports below run
+    if not args.quiet and sys.stderr.isatty():  # something from the first second (start-up takes 5-13 s)
+        print("starting: planning ...", end="", file=sys.stderr, flush=True)  # the bar overwrites it
     try:
         return _convert(args)
     finally:
@@ -332,7 +334,11 @@ def build_parser() -> argparse.ArgumentParser:
         description="Runs the Prefect flow: one task per episode (decode, align to the fps grid, encode, QA), "
         "then the reduce writes the dataset at --output atomically. Every episode is scored by QA: failing "
         "episodes and bags that cannot be converted are left out and listed (--on-qa-fail). A progress bar "
-        "shows on a terminal.",
+        "shows on a terminal from the first second (0/N as soon as the episodes are known); Prefect's console "
+        "lines are off unless --verbose, so each failure prints once (they still reach the Prefect API). The "
+        "last line counts this run's episodes (converted, reused from the staging store, with QA warnings, "
+        "excluded) and what the dataset holds. An --append whose contract gives other features or fps than "
+        "the dataset's meta/info.json is refused before anything converts.",
     )
     bags = convert.add_mutually_exclusive_group(required=True)
     bags.add_argument(

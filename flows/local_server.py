@@ -174,6 +174,9 @@ def launch() -> LocalServer | None:
     if _launched is None and not api_configured():
         _launched = LocalServer()
         os.environ["PREFECT_API_URL"] = _launched.api_url
+        # an offline run with a throwaway server: no SDK telemetry, no "Prefect collects anonymous
+        # usage data" notice on the terminal (a user's own DO_NOT_TRACK wins)
+        os.environ.setdefault("DO_NOT_TRACK", "1")
     return _launched
 
 

@@ -6,6 +6,7 @@ import json
 from pathlib import Path
 
 import pytest
+from mcap.writer import Writer
 
 from flows.cli import main
 from tests.helpers import realbag
@@ -40,6 +41,44 @@ def test_inspect_of_a_non_bag_is_one_clear_line(tmp_path: Path, capsys: pytest.C
     assert err.startswith("bagport inspect: error: ")
     assert "is not a ROS bag" in err
     assert "Traceback" not in err
+
+
+def _bag_with_an_unparsable_service_event(path: Path) -> None:
+    """An MCAP whose service-event schema (rosbag2 records services as ``<srv>/_service_event``) does
+    not parse: rosbags' parser error spans the whole definition over many lines."""
+    definition = (
+        "service_msgs/ServiceEventInfo info\n" + "=" * 80 + "\nMSG: service_msgs/ServiceEventInfo\n"
+        "uint8 event_type\nbuiltin_interfaces/Time stamp\nchar[16 client_gid\nint64 sequence_number\n"
+    )
+    with path.open("wb") as handle:
+        writer = Writer(handle)
+        writer.start(profile="ros2")
+        text = writer.register_schema("std_msgs/msg/String", "ros2msg", b"string data")
+        event = writer.register_schema(
+            "example_interfaces/srv/AddTwoInts_Event", "ros2msg", definition.encode()
+        )
+        chatter = writer.register_channel("/chatter", "cdr", text)
+        writer.register_channel("/add_two_ints/_service_event", "cdr", event)
+        writer.add_message(
+            chatter, log_time=1, publish_time=1, data=b"\x00\x01\x00\x00\x06\x00\x00\x00hello\x00"
+        )
+        writer.finish()  # type: ignore[no-untyped-call]
+
+
+def test_inspect_reports_an_unparsable_type_on_one_line(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """Issue 21 item 8: the parser's multi-line dump of the definition reached the user."""
+    bag = tmp_path / "services.mcap"
+    _bag_with_an_unparsable_service_event(bag)
+    assert main(["inspect", str(bag)]) == 0
+    out = capsys.readouterr().out
+    warning = next(line for line in out.splitlines() if "cannot be loaded" in line)
+    assert "AddTwoInts_Event" in warning
+    assert "syntax error at character" in warning
+    assert "near 'char[16 client_gid'" in warning
+    assert "int64 sequence_number" not in out  # the rest of the definition is not dumped
+    assert "MSG:" not in out
 
 
 def test_validate_exits_nonzero_with_the_violation(

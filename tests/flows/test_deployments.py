@@ -12,7 +12,7 @@ from prefect.flows import Flow, load_flow_from_entrypoint
 
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.convert import prefect_api
-from flows.deployments import ingest
+from flows.deployments import ParameterNotSetError, ingest, reconvert
 from tests.helpers import FAST_CODEC, REPO, SAMPLE_CONTRACT
 
 CAMERAS = (
@@ -26,10 +26,27 @@ def test_prefect_yaml_deployments_point_at_flows_with_valid_parameters() -> None
     deployments = {d["name"]: d for d in spec["deployments"]}
     assert set(deployments) == {"fleet-ingestion", "reconvert"}
     assert deployments["fleet-ingestion"]["schedules"][0]["cron"] == "0 * * * *"
-    assert deployments["fleet-ingestion"]["concurrency_limit"] == 1
+    # one run at a time; a run due while the previous one works is cancelled, not queued
+    assert deployments["fleet-ingestion"]["concurrency_limit"] == {
+        "limit": 1,
+        "collision_strategy": "CANCEL_NEW",
+    }
     for deployment in deployments.values():
         flow: Flow[..., Any] = load_flow_from_entrypoint(str(REPO / deployment["entrypoint"]))
         flow.validate_parameters(deployment["parameters"])  # raises on a missing or unknown parameter
+
+
+def test_deployment_parameters_are_placeholders_a_run_refuses_until_set() -> None:
+    """Finding 5 of issue 16: prefect.yaml pointed at example S3 and /data paths that went live on deploy."""
+    spec: dict[str, Any] = yaml.safe_load((REPO / "prefect.yaml").read_text())
+    ingestion = next(d for d in spec["deployments"] if d["name"] == "fleet-ingestion")
+    assert ingestion["parameters"]["output"] == "{{ $BAGPORT_OUTPUT }}"
+    reconvert_spec = next(d for d in spec["deployments"] if d["name"] == "reconvert")
+    assert {"staging", "keep_staging"} <= set(reconvert_spec["parameters"])
+    with pytest.raises(ParameterNotSetError, match=r"'output' is not set.*export BAGPORT_OUTPUT=\.\.\."):
+        ingest.fn(**ingestion["parameters"] | {"bags_glob": "s3://fleet/bags/*", "contract": "c.yaml"})
+    with pytest.raises(ParameterNotSetError, match=r"'manifest' is not set.*--param manifest="):
+        reconvert.fn(**reconvert_spec["parameters"])
 
 
 @pytest.mark.slow

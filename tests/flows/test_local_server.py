@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import os
 import urllib.error
 import urllib.request
 from pathlib import Path
 
 import pytest
 
+from flows import local_server
 from flows.local_server import LocalServer, api_configured
 
 
@@ -67,3 +69,26 @@ def test_the_server_answers_then_stops() -> None:
         server.stop()
     with pytest.raises(urllib.error.URLError):
         urllib.request.urlopen(f"{server.api_url}/health", timeout=2)
+
+
+@pytest.mark.slow
+def test_the_temporary_server_sends_no_telemetry(
+    no_prefect_config: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Issue 16 finding 6 / issue 21 item 8: offline, Prefect's telemetry logged a red ERROR (and once
+    a "database is locked" traceback) on every run, and its client printed a usage-data notice."""
+    monkeypatch.delenv("PREFECT_SERVER_ANALYTICS_ENABLED", raising=False)
+    monkeypatch.delenv("DO_NOT_TRACK", raising=False)
+    monkeypatch.setattr(local_server, "_launched", None)
+    server = local_server.launch()
+    assert server is not None
+    try:
+        assert os.environ["DO_NOT_TRACK"] == "1"
+        server.wait_ready(120)  # exec'd: /proc shows the server's own environment, not its parent's
+        assert server._process is not None
+        environ = Path(f"/proc/{server._process.pid}/environ").read_bytes().split(b"\0")
+        assert b"PREFECT_SERVER_ANALYTICS_ENABLED=false" in environ
+    finally:
+        local_server.take_launched()
+        server.stop()
+        monkeypatch.delenv("PREFECT_API_URL", raising=False)

@@ -21,6 +21,7 @@ from typing import Any
 
 import psutil
 import pytest
+from playwright.sync_api import Page, sync_playwright
 from prefect.client.orchestration import PrefectClient, get_client
 from prefect.client.schemas.actions import DeploymentScheduleCreate
 from prefect.client.schemas.filters import (
@@ -31,9 +32,12 @@ from prefect.client.schemas.filters import (
     FlowRunFilter,
     FlowRunFilterId,
     FlowRunFilterParentFlowRunId,
+    FlowRunFilterState,
+    FlowRunFilterStateType,
 )
-from prefect.client.schemas.objects import FlowRun
-from prefect.client.schemas.schedules import IntervalSchedule
+from prefect.client.schemas.objects import Artifact, FlowRun, StateType
+from prefect.client.schemas.schedules import CronSchedule, IntervalSchedule
+from prefect.client.schemas.sorting import FlowRunSort
 from prefect.settings import PREFECT_API_URL, temporary_settings
 from s3fs import S3FileSystem
 
@@ -42,6 +46,8 @@ from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import REPO, SAMPLE_CONTRACT
 
 pytestmark = pytest.mark.slow
+
+CHROMIUM = "/usr/bin/chromium"  # Debian's (scripts/setup_browser.sh): browsers cannot be downloaded here
 
 CAMERAS = (
     CameraSpec("front", "raw", "bgr8", height=48, width=64),
@@ -102,39 +108,48 @@ def _upload_bag(fs: S3FileSystem, tmp: Path, name: str) -> None:
     fs.put(str(local), f"fleet/bags/{name}", recursive=True)
 
 
-async def _deployment_runs(client: PrefectClient, deployment_id: Any) -> list[FlowRun]:
+async def _finished_runs(client: PrefectClient, deployment_id: Any) -> list[FlowRun]:
+    """The deployment's runs that ended Completed (with or without exclusions), Failed or Crashed."""
+    final = [StateType.COMPLETED, StateType.FAILED, StateType.CRASHED]
     return await client.read_flow_runs(
-        deployment_filter=DeploymentFilter(id=DeploymentFilterId(any_=[deployment_id]))
+        deployment_filter=DeploymentFilter(id=DeploymentFilterId(any_=[deployment_id])),
+        flow_run_filter=FlowRunFilter(state=FlowRunFilterState(type=FlowRunFilterStateType(any_=final))),
+        sort=FlowRunSort.EXPECTED_START_TIME_ASC,
     )
 
 
 async def _wait_run(
     client: PrefectClient, deployment_id: Any, seen: set[Any], timeout_s: float = 240
 ) -> FlowRun:
-    """The next run of the deployment not in ``seen`` that reached a final state other than Cancelled
-    (a scheduled run due while the previous one works is cancelled: collision strategy CANCEL_NEW)."""
+    """The next run of the deployment not in ``seen`` that finished (a scheduled run due while the
+    previous one works is cancelled, collision strategy CANCEL_NEW: those are not waited for)."""
     deadline = time.monotonic() + timeout_s
     while time.monotonic() < deadline:
-        for run in sorted(
-            await _deployment_runs(client, deployment_id), key=lambda r: r.expected_start_time or 0
-        ):
-            if run.id in seen or run.state is None or not run.state.is_final():
-                continue
-            seen.add(run.id)
-            if not run.state.is_cancelled():
+        for run in await _finished_runs(client, deployment_id):
+            if run.id not in seen:
+                seen.add(run.id)
                 return run
         await asyncio.sleep(1)
     raise AssertionError(f"no run of deployment {deployment_id} finished within {timeout_s:g} s")
 
 
-async def _task_runs(client: PrefectClient, run: FlowRun) -> list[str]:
-    """``<name> <tags>`` of the convert tasks of the run's conversion subflow."""
-    subflows = await client.read_flow_runs(
+async def _subflows(client: PrefectClient, run: FlowRun) -> list[Any]:
+    children = await client.read_flow_runs(
         flow_run_filter=FlowRunFilter(parent_flow_run_id=FlowRunFilterParentFlowRunId(any_=[run.id]))
     )
-    tasks = await client.read_task_runs(
-        flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=[s.id for s in subflows]))
+    return [child.id for child in children]
+
+
+async def _artifacts(client: PrefectClient, run: FlowRun) -> list[Artifact]:
+    return await client.read_artifacts(
+        artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[run.id]))
     )
+
+
+async def _task_runs(client: PrefectClient, run: FlowRun) -> list[str]:
+    """``<name> <tags>`` of the convert tasks of the run's conversion subflow."""
+    subflows = await _subflows(client, run)
+    tasks = await client.read_task_runs(flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=subflows)))
     return sorted(
         f"{t.name} {' '.join(sorted(x for x in t.tags if x.startswith('bag:')))} {t.state_name}"
         for t in tasks
@@ -158,10 +173,7 @@ async def _scenario(env: dict[str, str], tmp: Path) -> dict[str, Any]:
         first = await _wait_run(client, ingestion.id, seen)
         story["first"] = (first.name, first.state_name, first.work_pool_name)
         story["first_tasks"] = await _task_runs(client, first)
-        artifacts = await client.read_artifacts(
-            artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[first.id]))
-        )
-        story["first_artifacts"] = {str(a.key): str(a.data) for a in artifacts if a.key}
+        story["first_artifacts"] = {str(a.key): str(a.data) for a in await _artifacts(client, first) if a.key}
         _upload_bag(fs, tmp, "day2_a")
         second = await _wait_run(client, ingestion.id, seen)
         while "+0" in str(second.name):  # a run that started before the upload finished
@@ -175,9 +187,17 @@ async def _scenario(env: dict[str, str], tmp: Path) -> dict[str, Any]:
         story["third_tasks"] = await _task_runs(client, third)
         fourth = await _wait_run(client, ingestion.id, seen)
         story["fourth"] = (fourth.name, fourth.state_name)
+        # back to prefect.yaml's hourly schedule: the deployment page lists its upcoming runs
         for schedule in await client.read_deployment_schedules(ingestion.id):
             await client.delete_deployment_schedule(ingestion.id, schedule.id)
-        story["ui_runs"] = [str(first.id), str(third.id)]
+        hourly = DeploymentScheduleCreate(schedule=CronSchedule(cron="0 * * * *", timezone="UTC"))
+        await client.create_deployment_schedules(ingestion.id, [hourly])
+        story["ui"] = {
+            "deployment": str(ingestion.id),
+            "first_subflow": str((await _subflows(client, first))[0]),
+            "third_subflow": str((await _subflows(client, third))[0]),
+            "third_qa": str(next(a.id for a in await _artifacts(client, third) if a.key == "bagport-qa")),
+        }
         # reconvert through the API, twice: the second with a changed contract reuses the camera clips
         changed = SAMPLE_CONTRACT.read_text().replace("position.j5, position.j6]", "position.j5]", 1)
         fs.pipe("fleet/contracts/changed.yaml", changed.encode())
@@ -203,6 +223,68 @@ async def _scenario(env: dict[str, str], tmp: Path) -> dict[str, Any]:
             assert done.id == run.id
             story[output] = (done.name, done.state_name)
     return story
+
+
+def _run_order(path: str) -> tuple[bool, str]:
+    """``run.json`` (the first run), then ``run-001.json``, ``run-002.json``..."""
+    return not path.endswith("/run.json"), path
+
+
+def _wait_for_text(page: Page, url: str, expected: list[str], shot: Path, timeout_s: float = 60) -> str:
+    """Open ``url`` and wait until the page's text holds every expected string; screenshot it."""
+    if url:
+        page.goto(url)
+    deadline = time.monotonic() + timeout_s
+    text = ""
+    while time.monotonic() < deadline:
+        text = page.inner_text("body")
+        if all(item in text for item in expected):
+            break
+        time.sleep(0.5)
+    page.screenshot(path=str(shot), full_page=True)
+    missing = [item for item in expected if item not in text]
+    assert not missing, f"{url or page.url}: {missing} not on the page (screenshot {shot}):\n{text[:3000]}"
+    return text
+
+
+def _check_ui(ui_url: str, ids: dict[str, str], shots: Path) -> None:
+    """Chromium (Debian's, through Playwright) on the Prefect UI, as a person looks at the runs."""
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 1600, "height": 1200})
+            _wait_for_text(
+                page, f"{ui_url}/runs", ["Completed with exclusions", "1 excluded"], shots / "runs.png"
+            )
+            _wait_for_text(
+                page, f"{ui_url}/runs/flow-run/{ids['first_subflow']}", ["Task Runs"], shots / "a.png"
+            )
+            page.get_by_text("Task Runs", exact=True).first.click()
+            _wait_for_text(
+                page,
+                "",
+                ["convert day1_a", "bag:day1_a", "convert day1_b", "bag:day1_b"],
+                shots / "tasks.png",
+            )
+            _wait_for_text(
+                page, f"{ui_url}/runs/flow-run/{ids['third_subflow']}", ["Task Runs"], shots / "b.png"
+            )
+            page.get_by_text("Task Runs", exact=True).first.click()
+            _wait_for_text(page, "", ["convert broken.mcap", "Failed"], shots / "failed-task.png")
+            _wait_for_text(
+                page,
+                f"{ui_url}/artifacts/artifact/{ids['third_qa']}",
+                ["broken.mcap", "excluded", "conversion failed", "is not a ROS bag"],
+                shots / "qa-artifact.png",
+            )
+            _wait_for_text(
+                page,
+                f"{ui_url}/deployments/deployment/{ids['deployment']}",
+                ["fleet-ingestion", "Upcoming", "Scheduled for"],
+                shots / "deployment.png",
+            )
+        finally:
+            browser.close()
 
 
 def test_the_stack_runs_scheduled_ingestion_and_reconvert(stack: dict[str, str], tmp_path: Path) -> None:
@@ -246,7 +328,8 @@ def test_the_stack_runs_scheduled_ingestion_and_reconvert(stack: dict[str, str],
     assert story["fourth"][0].endswith(": +0 episode(s)")  # the unchanged broken bag is not retried
     assert story["re2"][1] == "Completed"
     records = [
-        json.loads(fs.cat(p)) for p in sorted(fs.glob("fleet/datasets/fleet/meta/provenance/run*.json"))
+        json.loads(fs.cat(p))
+        for p in sorted(fs.glob("fleet/datasets/fleet/meta/provenance/run*.json"), key=_run_order)
     ]
     assert [[Path(u).name for u in r["manifest"]["converted_now"]] for r in records] == [
         ["day1_a", "day1_b"],
@@ -257,6 +340,7 @@ def test_the_stack_runs_scheduled_ingestion_and_reconvert(stack: dict[str, str],
     assert [sorted(e["reused_clips"]) for e in reused["episodes"]] == [
         ["observation.images.front", "observation.images.wrist"]
     ] * 3
+    _check_ui(stack["PREFECT_UI_URL"], story["ui"], tmp_path)
     local = tmp_path / "fleet"
     fs.get("fleet/datasets/fleet", str(local), recursive=True)
     assert validate_dataset(local, repo_id="test/stack", decode_every=5).episodes == 3

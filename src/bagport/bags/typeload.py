@@ -38,7 +38,7 @@ from rosbags.typesys.base import TypesysError
 
 from bagport.msgtypes import normalize_msgtype
 
-__all__ = ["TolerantAnyReader", "is_placeholder", "is_service_event"]
+__all__ = ["TolerantAnyReader", "is_placeholder", "is_service_event", "one_line"]
 
 _IDL_SEPARATOR = "=" * 80 + "\n"
 _SERVICE_EVENT = re.compile(r"(/_service_event$)|(/srv/\w+_Event$)")
@@ -62,10 +62,14 @@ def _types_of(msgtype: str, definition_format: MessageDefinitionFormat, data: st
     return dict(get_types_from_idl(_INCLUDE.sub("", data)))
 
 
-def _first_line(err: Exception) -> str:
-    """rosbags' parser errors dump the whole definition: the first line says what failed."""
+def one_line(err: Exception, limit: int = 200) -> str:
+    """A type-system error on one line: rosbags' parser dumps the whole definition over many lines
+    (``Could not parse:`` / the text / the offset / the rest); keep where it stopped."""
     lines = [line.strip() for line in str(err).splitlines() if line.strip()]
-    return lines[0].rstrip(":") if lines else type(err).__name__
+    if len(lines) >= 4 and lines[0].startswith("Could not parse") and lines[2].isdigit():
+        return f"syntax error at character {lines[2]}, near {lines[3]!r}"
+    text = " ".join(lines)
+    return text if len(text) <= limit else f"{text[: limit - 3]}..."
 
 
 def is_placeholder(connection: Connection) -> bool:
@@ -147,7 +151,7 @@ def _typestore(
             types.update(_types_of(msgtype, definition_format, data))
         except (TypesysError, ValueError, KeyError, IndexError) as err:
             unloadable[normalize_msgtype(msgtype)] = (
-                f"its embedded {definition_format.name.lower()} definition does not parse ({_first_line(err)})"
+                f"its embedded {definition_format.name.lower()} definition does not parse ({one_line(err)})"
             )
             continue
         if digest:
@@ -160,7 +164,7 @@ def _typestore(
         except KeyError:
             continue  # it uses a type defined elsewhere (an #include): completed, then read, later
         except (TypesysError, ValueError) as err:
-            unloadable[msgtype] = f"its definition cannot be hashed ({_first_line(err)})"
+            unloadable[msgtype] = f"its definition cannot be hashed ({one_line(err)})"
             continue
         if have != digest:
             unloadable[msgtype] = f"its definition hashes to {have}, the bag records {digest}"

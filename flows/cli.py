@@ -587,9 +587,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         os.environ["PREFECT_LOGGING_LEVEL"] = "ERROR"
     else:
         os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
-    if not getattr(args, "verbose", False):
-        # Prefect's console lines repeat what bagport prints once (a failing bag's message came 4-6
-        # times); they still reach the API (the UI's run logs). --verbose shows them.
+    # Prefect's console lines repeat what bagport prints once (a failing bag's message came 4-6 times);
+    # they still reach the API (the UI's run logs). --verbose shows them (set, not defaulted: an earlier
+    # in-process call may have turned them off in this environment, and child processes inherit it).
+    if getattr(args, "verbose", False):
+        os.environ["PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL"] = "INFO"
+    else:
         os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "CRITICAL")
     func: Callable[[argparse.Namespace], int] = args.func
     _install_crash_hook()

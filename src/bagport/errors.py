@@ -16,6 +16,7 @@ __all__ = [
     "DatasetWriteError",
     "DecodeError",
     "ManifestError",
+    "PushError",
     "QualityError",
     "TransientError",
     "ValidationError",

@@ -49,7 +49,10 @@ def recorded_paths(root: Path) -> list[str]:
         for row in _rows(json.loads(summary.read_text())):
             if isinstance(row, dict) and row.get("bag_uri"):
                 paths.add(str(row["bag_uri"]))
-    return sorted((p for p in paths if "/" in p), key=len, reverse=True)
+    # the QA report groups bags by folder (its breakdown by bag prefix), and names the dataset itself
+    paths.update(p.rstrip("/").rsplit("/", 1)[0] for p in list(paths) if "/" in p.rstrip("/"))
+    paths.add(str(root))
+    return sorted((p for p in paths if "/" in p and p.strip("/")), key=len, reverse=True)
 
 
 def _rows(data: Any) -> list[Any]:

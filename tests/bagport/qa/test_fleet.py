@@ -41,7 +41,9 @@ def _converted(tmp_path: Path) -> list[QAEntry]:
         (Faults(), Faults(camera_dropout=Window(1.0, 0.4, "front"), joint_nan_at_s=2.0))
     ):
         bag = tmp_path / "fleet" / f"nan-{index}"
-        write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=CAMERAS, faults=fault))
+        write_episode_bag(
+            bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=CAMERAS, faults=fault, mcap_crcs=True)
+        )
         request = EpisodeRequest(
             episode_id=f"ep{index}", bag_uri=str(bag), manifest_entry=index, staging_uri=str(tmp_path / "staging"),
             contract_text=SAMPLE_CONTRACT.read_text(), contract_name="sample_robot.yaml", encoder=FAST_CODEC,

@@ -52,7 +52,9 @@ def test_a_one_radian_spike_warns_by_default_in_a_converted_fleet(tmp_path: Path
     for i in range(5):
         faults = Faults(joint_spike=(1.5, 1.0)) if i == 3 else Faults()
         write_episode_bag(
-            tmp_path / f"b{i}", "mcap", EpisodeSpec(duration_s=3.0, seed=i, cameras=camera, faults=faults)
+            tmp_path / f"b{i}",
+            "mcap",
+            EpisodeSpec(duration_s=3.0, seed=i, cameras=camera, faults=faults, mcap_crcs=True),
         )
         names.append(f"b{i}")
     manifest = tmp_path / "manifest.yaml"

@@ -29,7 +29,9 @@ def _entries(tmp_path: Path) -> list[QAEntry]:
     faults = (Faults(), Faults(camera_dropout=Window(1.0, 0.4, "front"), joint_nan_at_s=2.0))
     for index, fault in enumerate(faults):
         bag = tmp_path / f"ep{index}"
-        write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=CAMERAS, faults=fault))
+        write_episode_bag(
+            bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=CAMERAS, faults=fault, mcap_crcs=True)
+        )
         request = EpisodeRequest(
             episode_id=f"ep{index}",
             bag_uri=str(bag),

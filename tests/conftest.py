@@ -27,3 +27,18 @@ def s3_env() -> Iterator[dict[str, str]]:
 
     with moto_s3() as env:
         yield env
+
+
+@pytest.fixture(autouse=True)
+def _cli_environment() -> Iterator[None]:
+    """``bagport``'s ``main()`` sets Prefect's logging variables in ``os.environ`` (it must: before Prefect is
+    imported, and for the processes it starts); a test that calls it in-process must not pass them on to
+    the next test's subprocesses and worker processes."""
+    keys = ("PREFECT_LOGGING_LEVEL", "PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL")
+    before = {key: os.environ.get(key) for key in keys}
+    yield
+    for key, value in before.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value

@@ -485,9 +485,10 @@ def build_parser() -> argparse.ArgumentParser:
         "inspect",
         help="print what `ros2 bag info` prints, without ROS",
         description="Prints storage, files, size, duration, start/end, and per topic its type, count and mean "
-        "rate; any warning about the bag's layout (e.g. a stale metadata.yaml); for a remote bag, how it was "
-        "read and the bytes that cost (an MCAP on S3: its summary only); then every topic whose type no source "
-        "defines.",
+        "rate; whether checksums cover its bytes (Checksums:, with a warning naming the recorder setting that "
+        "adds them when none do); any warning about the bag's layout (e.g. a stale metadata.yaml), one line per "
+        "problem; for a remote bag, how it was read and the bytes that cost (an MCAP on S3: its summary only); "
+        "then every topic whose type no source defines.",
     )
     inspect.add_argument("uri", nargs="+", help="bag folder, .mcap, .db3 or .bag (local or fsspec URI)")
     inspect.set_defaults(func=_cmd_inspect)
@@ -495,9 +496,10 @@ def build_parser() -> argparse.ArgumentParser:
     validate = sub.add_parser(
         "validate",
         help="check checksums, load a dataset with LeRobot and decode every frame",
-        description="Checks the recorded SHA-256 of every file and the LeRobot v3.0 invariants, loads the "
-        "dataset with lerobot.LeRobotDataset (offline) and decodes every frame. Exits 2 with a precise message "
-        "on the first violation.",
+        description="Says 'needs repair' if a write into the dataset did not finish; checks every file's "
+        "SHA-256 against the run record (naming a changed, missing or unrecorded file) and the LeRobot v3.0 "
+        "invariants, then loads the dataset with lerobot.LeRobotDataset (offline) and decodes every frame. "
+        "Exits 2 with a precise message on the first violation.",
     )
     validate.add_argument("root", help="dataset folder")
     validate.add_argument("--repo-id", default=None)
@@ -507,7 +509,12 @@ def build_parser() -> argparse.ArgumentParser:
     validate.set_defaults(func=_cmd_validate)
 
     repair = sub.add_parser(
-        "repair", help="finish or undo a write into a dataset that a crash interrupted, and say what was done"
+        "repair",
+        help="finish or undo a write into a dataset that a crash interrupted, and say what was done",
+        description="Finishes or undoes a write into OUT (local or s3://...) that a crash interrupted, from its "
+        "intent record (.bagport-journal.json), and prints what it did (or 'nothing to repair'); also removes "
+        "temporary folders of dead bagport runs. Every convert does the same first, so a scheduled run never "
+        "appends onto an unrecovered dataset.",
     )
     repair.add_argument("output", help="dataset folder or URI (as given to convert --output)")
     repair.set_defaults(func=_cmd_repair)

@@ -67,7 +67,13 @@ def add_push_options(command: argparse.ArgumentParser) -> None:
 
 def add_push_command(sub: Any) -> None:
     push = sub.add_parser(
-        "push", help="upload a LeRobot dataset to the Hugging Face Hub (HF_TOKEN from the environment)"
+        "push",
+        help="upload a LeRobot dataset to the Hugging Face Hub (HF_TOKEN from the environment)",
+        description="Uploads the LeRobot dataset at OUT (a local folder) to the Hugging Face Hub as LeRobot's own "
+        "push_to_hub does: the dataset card, the v3.0 tag LeRobot's loader looks for, meta/provenance and the "
+        "QA report (redacted by default: bag paths reduced to their names, manifest metadata dropped). "
+        "HF_TOKEN is read from the environment and never logged. `convert --push-to-hub` does the same after "
+        "converting.",
     )
     push.add_argument("root", help="dataset folder (local)")
     push.add_argument("--repo-id", required=True, help="Hub dataset repo, ORG/NAME")

@@ -29,16 +29,18 @@ def s3_env() -> Iterator[dict[str, str]]:
         yield env
 
 
+_CLI_KEYS = ("PREFECT_LOGGING_LEVEL", "PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL")
+_SESSION_ENV = {key: os.environ.get(key) for key in _CLI_KEYS}
+
+
 @pytest.fixture(autouse=True)
 def _cli_environment() -> Iterator[None]:
     """``bagport``'s ``main()`` sets Prefect's logging variables in ``os.environ`` (it must: before Prefect is
-    imported, and for the processes it starts); a test that calls it in-process must not pass them on to
-    the next test's subprocesses and worker processes."""
-    keys = ("PREFECT_LOGGING_LEVEL", "PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL")
-    before = {key: os.environ.get(key) for key in keys}
-    yield
-    for key, value in before.items():
+    imported, and for the processes it starts); whatever called it in-process before (a test, a module
+    fixture) must not pass them on to this test's subprocesses and worker processes."""
+    for key, value in _SESSION_ENV.items():
         if value is None:
             os.environ.pop(key, None)
         else:
             os.environ[key] = value
+    yield

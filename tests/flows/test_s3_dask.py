@@ -42,6 +42,7 @@ def test_s3_bags_staging_and_output_on_an_existing_dask_cluster(
     # The workers inherit the AWS variables (as `dask worker` would from its host) and log at INFO
     # to this process's stderr, where capfd reads them.
     monkeypatch.setenv("PREFECT_LOGGING_LEVEL", "INFO")
+    monkeypatch.setenv("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "INFO")
     with (
         LocalCluster(  # type: ignore[no-untyped-call]
             n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None

@@ -107,6 +107,8 @@ def _earlier_episodes(request: EpisodeRequest) -> list[EpisodeSummary]:
     """Completed staged episodes of the same bag URI under other contracts or settings."""
     stem = request.episode_id.rsplit("-", 1)[0]  # episode ids are <bag name>-<digest>
     fs, path = url_to_fs(episode_dir(request.staging_uri, f"{stem}-*"))
+    # a long-lived worker (Dask, Ray) keeps fsspec's listing cache across runs: list the store as it is now
+    fs.invalidate_cache(url_to_fs(request.staging_uri)[1])
     found = []
     for marker in sorted(fs.glob(staged_path(path, EPISODE_SUMMARY))):
         summary = read_summary(fs.unstrip_protocol(marker.rsplit("/", 1)[0]))

@@ -94,6 +94,7 @@ def list_staged(staging_uri: str) -> frozenset[str]:
     """The ids of every completed staged episode (one listing of the store; ``episode.json`` is written
     last, so its presence marks completion)."""
     fs, path = url_to_fs(episode_dir(staging_uri, "*"))
+    fs.invalidate_cache(url_to_fs(staging_uri)[1])  # a long-lived process may hold an older listing
     try:
         markers = fs.glob(staged_path(path, EPISODE_SUMMARY))
     except (FileNotFoundError, NotADirectoryError):

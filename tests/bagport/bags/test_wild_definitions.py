@@ -120,7 +120,8 @@ def test_idl_that_does_not_parse_is_one_paragraph_and_msg_path_can_replace_it(tm
         list(reader.messages(["/grip"]))
     assert str(caught.value) == (
         f"{bag}: topic /grip has type acme_msgs/msg/Grip, which cannot be loaded: its embedded idl definition "
-        "does not parse (Could not parse) [topic=/grip] Fix: provide the type's .msg definition with "
+        "does not parse (syntax error at character 53, near '{') [topic=/grip] Fix: provide the type's .msg "
+        "definition with "
         "--msg-path, or drop the topic from the contract."
     )
     definitions = {

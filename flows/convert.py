@@ -3,16 +3,12 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Sequence
 from typing import Any
 
 from prefect import flow, get_run_logger
 from prefect.client.schemas.objects import State
-from prefect.events.worker import EventsWorker
 from prefect.futures import PrefectFuture, as_completed
-from prefect.logging.handlers import APILogWorker
-from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
 from prefect.states import Failed
 from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
 
@@ -26,8 +22,8 @@ from bagport.errors import BagportError, QualityError
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
-from flows.local_server import ServerUnreachableError, check_reachable, take_launched
 from flows.run_story import completed_state
+from flows.runners import RayMissingError, ServerDownError, dask_runner, prefect_api, ray_runner
 from tasks.episode import convert_batch_task, convert_episode_task
 from tasks.plan import plan_task
 from tasks.reduce import reduce_task
@@ -305,135 +301,14 @@ def _cancel_ray(ref: Any) -> bool:
     return True
 
 
-@contextmanager
-def prefect_api() -> Iterator[None]:
-    """Use the configured Prefect API, else one temporary local server shared by every worker.
-
-    Without this, each process-pool worker would start a temporary server of its own
-    (15-20 s each here), because Prefect does not pass its ephemeral server's URL on. The CLI
-    launches the server before its heavy imports (:func:`flows.local_server.launch`), so it
-    boots while bagport and Prefect import.
-    """
-    launched = take_launched()
-    if launched is not None:
-        try:
-            launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
-            with _draining():
-                yield
-        finally:
-            launched.stop()
-        return
-    if get_current_settings().api.url:
-        _require_server(str(get_current_settings().api.url))
-        yield
-        return
-    from prefect.server.api.server import SubprocessASGIServer  # noqa: PLC0415 - only without a server
-
-    server = SubprocessASGIServer()
-    server.start(timeout=get_current_settings().server.ephemeral.startup_timeout_seconds)
-    previous = os.environ.get("PREFECT_API_URL")
-    os.environ["PREFECT_API_URL"] = server.api_url
-    try:
-        with temporary_settings({PREFECT_API_URL: server.api_url}), _draining():
-            yield
-    finally:
-        if previous is None:
-            os.environ.pop("PREFECT_API_URL", None)
-        else:
-            os.environ["PREFECT_API_URL"] = previous
-        server.stop()
-
-
-class ServerDownError(BagportError):
-    """The configured Prefect API does not answer."""
-
-
-def _require_server(api_url: str) -> None:
-    """One paragraph (exit 2) instead of Prefect's long traceback when the configured server is down."""
-    try:
-        check_reachable(api_url)
-    except ServerUnreachableError as err:
-        raise ServerDownError(str(err)) from None
-
-
-@contextmanager
-def _draining() -> Iterator[None]:
-    """Deliver queued logs and events while the server still listens."""
-    try:
-        yield
-    finally:
-        APILogWorker.drain_all(timeout=10)
-        EventsWorker.drain_all(timeout=10)
-
-
-def _dask_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
-    """Dask through prefect-dask: an existing scheduler, or a local cluster of worker processes.
-
-    Workers share no disk with the flow: bags, staging and output move as fsspec URIs.
-    One thread per worker keeps encoder memory per worker predictable.
-    """
-    from prefect_dask.task_runners import DaskTaskRunner  # noqa: PLC0415 - only when asked for
-
-    if config.dask_address:
-        runner: TaskRunner[Any] = DaskTaskRunner(address=config.dask_address)
-    else:
-        runner = DaskTaskRunner(
-            cluster_kwargs={
-                "n_workers": workers,
-                "threads_per_worker": 1,
-                "processes": True,
-                "dashboard_address": None,
-            }
-        )
-    return runner
-
-
-class RayMissingError(BagportError):
-    """``--runner ray`` without the ``ray`` extra installed."""
-
-    def __init__(self, missing: str) -> None:
-        super().__init__(
-            f"--runner ray needs prefect-ray and Ray, which are not installed here ({missing}). "
-            "Fix: pip install 'bagport[ray]' (uv sync --extra ray; make setup installs every extra), "
-            "or choose --runner process, thread or dask."
-        )
-
-
-def _ray_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
-    """Ray through prefect-ray: an existing cluster, or a local instance of ``workers`` CPUs.
-
-    Each episode is a Ray task holding Ray's default of one CPU, so a node with N CPUs converts
-    at most N episodes at once, like one Dask worker thread per episode. Workers share no disk
-    with the flow: bags, staging and output move as fsspec URIs.
-    """
-    try:
-        from prefect_ray import RayTaskRunner  # noqa: PLC0415 - only when asked for
-    except ImportError as err:
-        raise RayMissingError(str(err)) from err
-
-    runner: TaskRunner[Any]
-    if config.ray_address == "auto":
-        # prefect-ray would drop "auto" and start a local instance where none runs; Ray's "auto"
-        # connects to the cluster this machine belongs to, or fails.
-        runner = RayTaskRunner(init_kwargs={"address": "auto"})
-    elif config.ray_address:
-        runner = RayTaskRunner(address=config.ray_address)
-    else:
-        # "local": a fresh instance even where one runs already (ray.init would join that one).
-        runner = RayTaskRunner(
-            init_kwargs={"address": "local", "num_cpus": workers, "num_gpus": 0, "include_dashboard": False}
-        )
-    return runner
-
-
 def run_config(config: ConvertConfig) -> DatasetReport:
     """Run the conversion flow (or subflow, inside a deployment's flow) with the config's task runner."""
     workers = config.workers or os.cpu_count() or 1
     runner: TaskRunner[Any]
     if config.runner == "dask":
-        runner = _dask_runner(config, workers)
+        runner = dask_runner(config, workers)
     elif config.runner == "ray":
-        runner = _ray_runner(config, workers)
+        runner = ray_runner(config, workers)
     elif config.runner == "process" and workers > 1:
         runner = ProcessPoolTaskRunner(max_workers=workers)
     else:

@@ -9,10 +9,9 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Any
 
-import fsspec
 from fsspec.core import url_to_fs
 
 from bagport import __version__
@@ -26,12 +25,13 @@ from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
-from bagport.errors import DatasetWriteError, QualityError
+from bagport.errors import DatasetWriteError
 from bagport.formats import check_format_outputs, write_formats
 from bagport.manifest import Manifest, load_manifest, parse_manifest
-from bagport.qa import EpisodeQA, QAConfig, QAEntry, load_qa_config
-from bagport.segment import EXCLUDED_LABELS, kept_segmentation, label_reason, segment_request, segments_bags
-from bagport.staging import QA_FILE, EpisodeSummary, read_summary
+from bagport.qa import QAConfig, load_qa_config
+from bagport.segment import kept_segmentation, segment_request, segments_bags
+from bagport.selection import EpisodeFailure, select_episodes
+from bagport.staging import EpisodeSummary, read_summary
 from bagport.uris import read_text, require_bucket
 from bagport.video import EncoderSettings
 
@@ -59,31 +59,6 @@ class RunPlan:
     staged_ids: frozenset[str] = frozenset()
     """Every completed staged episode when the run was planned (episodes of split bags are matched
     against it once the bag is split)."""
-
-
-@dataclass(frozen=True, slots=True)
-class EpisodeFailure:
-    """A bag whose conversion failed: its request and bagport's one-paragraph error."""
-
-    bag_uri: str
-    manifest_entry: int
-    error: str
-    segment: int | None = None
-    label: str | None = None
-    note: str = ""
-    metadata: dict[str, Any] = field(default_factory=dict)
-
-    @classmethod
-    def of(cls, request: EpisodeRequest, error: str) -> EpisodeFailure:
-        return cls(
-            request.bag_uri,
-            request.manifest_entry,
-            error,
-            request.segment,
-            request.label,
-            request.note,
-            dict(request.metadata),
-        )
 
 
 def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
@@ -238,105 +213,8 @@ def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str
     }
 
 
-@dataclass(frozen=True, slots=True)
-class _Episode:
-    segment: int | None
-    label: str | None
-    note: str
-    metadata: dict[str, Any]
-
-
-def _read_qa(summary: EpisodeSummary) -> EpisodeQA:
-    try:
-        with fsspec.open(summary.file(QA_FILE), "r", encoding="utf-8") as handle:
-            return EpisodeQA.from_dict(json.load(handle))
-    except FileNotFoundError as err:
-        raise DatasetWriteError(
-            f"staged episode {summary.dir_uri} has no {QA_FILE} (staged by an older bagport); re-run the conversion."
-        ) from err
-
-
-def select_episodes(
-    plan: RunPlan, summaries: Sequence[EpisodeSummary], failures: Sequence[EpisodeFailure]
-) -> tuple[list[EpisodeSummary], list[QAEntry]]:
-    """Apply the QA policy: which staged episodes go into the dataset, and every bag's QA entry.
-
-    ``exclude`` leaves out failing episodes and failed bags (listed with the reason), ``keep``
-    keeps failing episodes (flagged in ``meta/qa``), ``fail_run`` stops before anything is written.
-    """
-    policy = plan.qa.on_fail
-    keep_labelled = plan.config.keep_failed
-    rows: list[tuple[int, EpisodeQA, EpisodeSummary | None, _Episode]] = [
-        (s.manifest_entry, _read_qa(s), s, _Episode(s.segment, s.label, s.note, s.metadata))
-        for s in summaries
-    ]
-    rows += [
-        (
-            f.manifest_entry,
-            EpisodeQA.failed(f.bag_uri, f.error),
-            None,
-            _Episode(f.segment, f.label, f.note, f.metadata),
-        )
-        for f in failures
-    ]
-    rows.sort(key=lambda row: (row[0], row[1].bag_uri, -1 if row[3].segment is None else row[3].segment))
-    by_label = [not keep_labelled and row[3].label in EXCLUDED_LABELS for row in rows]
-    failing = [
-        (entry, qa)
-        for (entry, qa, summary, _), labelled in zip(rows, by_label, strict=True)
-        if qa.verdict == "fail" and summary is not None and not labelled
-    ]
-    failed = [
-        f for f in failures if keep_labelled or f.label not in EXCLUDED_LABELS
-    ]  # a failed demonstration that could not be converted either is left out by its label
-    if policy == "fail_run" and (failing or failed):
-        lines = [f"- bags[{entry}] {qa.bag_uri}: {qa.headline()}" for entry, qa in failing]
-        lines += [f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failed]
-        raise QualityError(
-            f"{len(lines)} of {len(rows)} bag(s) {QualityError.MARKER} and on_fail is 'fail_run'; nothing was "
-            f"written at {plan.config.output}.\n" + "\n".join(lines),
-        )
-    kept: list[EpisodeSummary] = []
-    entries: list[QAEntry] = []
-    for (entry, qa, summary, episode), labelled in zip(rows, by_label, strict=True):
-        if labelled:
-            row = QAEntry(qa, entry, None, label_reason(episode.label, episode.note), by_label=True)
-        elif summary is None:
-            row = QAEntry(qa, entry, None, f"conversion failed: {qa.error}")
-        elif qa.verdict == "fail" and policy == "exclude":
-            row = QAEntry(qa, entry, None, f"excluded by QA: {qa.headline()}")
-        else:
-            row = QAEntry(qa, entry, len(kept))
-            kept.append(summary)
-        entries.append(
-            replace(
-                row,
-                segment=episode.segment,
-                label=episode.label,
-                note=episode.note,
-                metadata=episode.metadata,
-            )
-        )
-    if not kept and not _appends_to_existing(plan):
-        # (an append still records the exclusions, so an unchanged bad bag is not retried by every run)
-        reasons = "\n".join(
-            f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries
-        )
-        raise QualityError(
-            f"no episode is left to write: all {len(entries)} bag(s) {QualityError.MARKER}.\n{reasons}\n"
-            "Fix: look at the reasons above; relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep "
-            "failing episodes (--keep-failed keeps episodes labelled failed or discarded)."
-        )
-    return kept, entries
-
-
 def _episode_name(bag_uri: str, segment: int | None) -> str:
     return bag_uri if segment is None else f"{bag_uri}#{segment}"
-
-
-def _appends_to_existing(plan: RunPlan) -> bool:
-    fs, out_path = url_to_fs(plan.config.output)
-    return plan.config.append and bool(fs.exists(out_path))
 
 
 def reduce_run(
@@ -353,7 +231,15 @@ def reduce_run(
                 f"staged episode {episode.dir_uri} is incomplete (no episode.json); re-run the conversion."
             )
         summaries.append(episode.apply(summary))
-    kept, entries = select_episodes(plan, summaries, failures)
+    fs, out_path = url_to_fs(plan.config.output)
+    kept, entries = select_episodes(
+        summaries,
+        failures,
+        policy=plan.qa.on_fail,
+        keep_labelled=plan.config.keep_failed,
+        output=plan.config.output,
+        appending=plan.config.append and bool(fs.exists(out_path)),
+    )
     limits = DatasetLimits(
         chunks_size=plan.config.chunks_size,
         data_files_size_in_mb=plan.config.data_files_size_in_mb,

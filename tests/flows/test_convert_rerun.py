@@ -23,7 +23,8 @@ from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import main
-from flows.convert import prefect_api, run_config
+from flows.convert import run_config
+from flows.runners import prefect_api
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
 pytestmark = pytest.mark.slow

@@ -11,8 +11,8 @@ import yaml
 from prefect.flows import Flow, load_flow_from_entrypoint
 
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from flows.convert import prefect_api
 from flows.deployments import ParameterNotSetError, ingest, reconvert
+from flows.runners import prefect_api
 from tests.helpers import FAST_CODEC, REPO, SAMPLE_CONTRACT
 
 CAMERAS = (

@@ -17,7 +17,8 @@ from bagport.errors import BagReadError, TransientError
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from flows.cli import main
-from flows.convert import ConversionError, prefect_api, run_config
+from flows.convert import ConversionError, run_config
+from flows.runners import prefect_api
 from tasks.episode import convert_episode_task
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 

@@ -18,7 +18,7 @@ import pytest
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from flows.cli import main
-from flows.convert import RayMissingError, _ray_runner
+from flows.runners import RayMissingError, ray_runner
 from tests.helpers import REPO, SAMPLE_CONTRACT
 
 EPISODES = 3
@@ -70,7 +70,7 @@ def test_ray_address_on_the_cli_without_runner_ray_exits_2(capfd: pytest.Capture
 def test_runner_ray_without_the_extra_says_how_to_install(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setitem(sys.modules, "prefect_ray", None)  # import prefect_ray -> ImportError
     with pytest.raises(RayMissingError, match=r"pip install 'bagport\[ray\]'"):
-        _ray_runner(_config(runner="ray"), workers=2)
+        ray_runner(_config(runner="ray"), workers=2)
 
 
 @pytest.mark.slow

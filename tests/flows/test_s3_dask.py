@@ -17,7 +17,7 @@ from distributed import Client, LocalCluster, get_task_stream
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.synth import EpisodeSpec, write_episode_bag
-from flows.convert import _dask_runner
+from flows.runners import dask_runner
 from tests.helpers import REPO, SAMPLE_CONTRACT
 from tests.s3 import KEY_ID, SECRET
 
@@ -107,7 +107,7 @@ def test_s3_bags_staging_and_output_on_an_existing_dask_cluster(
 def test_dask_runner_starts_a_local_cluster_or_connects_to_an_address() -> None:
     """The flow-started local cluster: the same runner with cluster settings (run end to end by the
     benchmark's bagport-dask1/2 tools); with an address, the runner connects instead."""
-    local = _dask_runner(ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out"), workers=3)
+    local = dask_runner(ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out"), workers=3)
     assert local.address is None  # type: ignore[attr-defined]
     assert local.cluster_kwargs == {  # type: ignore[attr-defined]
         "n_workers": 3,
@@ -118,7 +118,7 @@ def test_dask_runner_starts_a_local_cluster_or_connects_to_an_address() -> None:
     config = ConvertConfig(
         manifest="m.yaml", contract="c.yaml", output="out", runner="dask", dask_address="tcp://h:8786"
     )
-    remote = _dask_runner(config, workers=3)
+    remote = dask_runner(config, workers=3)
     assert remote.address == "tcp://h:8786"  # type: ignore[attr-defined]
 
 

@@ -10,28 +10,8 @@ import pytest
 from bagport.dataset import write_dataset
 from bagport.dataset.checksums import verify_checksums
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
 from bagport.errors import ValidationError
 from bagport.staging import EpisodeSummary
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import episode_request
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=32, width=48),
-    CameraSpec("wrist", "jpeg", height=32, width=48),
-)
-
-
-@pytest.fixture(scope="module")
-def staged(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeSummary]:
-    root = tmp_path_factory.mktemp("bags")
-    summaries = []
-    for i, name in enumerate(("a", "b")):
-        write_episode_bag(
-            root / name, "mcap", EpisodeSpec(duration_s=0.4, seed=i, cameras=CAMERAS, task=name)
-        )
-        summaries.append(convert_episode(episode_request(root / name, root / "staging")))
-    return summaries
 
 
 def _listed(root: Path, record: str) -> set[str]:

@@ -21,29 +21,11 @@ from bagport.dataset import write_dataset
 from bagport.dataset.crashpoints import STEPS, kill_after, set_hook
 from bagport.dataset.repair import interrupted_write, repair_dataset
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
 from bagport.errors import ValidationError
 from bagport.staging import EpisodeSummary
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import episode_request
 
 Tree = dict[str, str]
 SCENARIOS = ("first", "overwrite", "append")
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=32, width=48),
-    CameraSpec("wrist", "jpeg", height=32, width=48),
-)
-
-
-@pytest.fixture(scope="module")
-def staged(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeSummary]:
-    root = tmp_path_factory.mktemp("bags")
-    summaries = []
-    for i, name in enumerate(("a", "b")):
-        spec = EpisodeSpec(duration_s=0.5, seed=i, cameras=CAMERAS, task=name)
-        write_episode_bag(root / name, "mcap", spec)
-        summaries.append(convert_episode(episode_request(root / name, root / "staging")))
-    return summaries
 
 
 def _tree(root: Path) -> Tree:

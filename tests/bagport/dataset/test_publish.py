@@ -15,27 +15,7 @@ from bagport.dataset import write_dataset
 from bagport.dataset.crashpoints import set_hook
 from bagport.dataset.publish import exchange
 from bagport.dataset.validate import validate_dataset
-from bagport.episode import convert_episode
 from bagport.staging import EpisodeSummary
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import episode_request
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=32, width=48),
-    CameraSpec("wrist", "jpeg", height=32, width=48),
-)
-
-
-@pytest.fixture(scope="module")
-def staged(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeSummary]:
-    root = tmp_path_factory.mktemp("bags")
-    summaries = []
-    for i, name in enumerate(("a", "b")):
-        write_episode_bag(
-            root / name, "mcap", EpisodeSpec(duration_s=0.4, seed=i, cameras=CAMERAS, task=name)
-        )
-        summaries.append(convert_episode(episode_request(root / name, root / "staging")))
-    return summaries
 
 
 def test_exchange_swaps_two_folders_atomically(tmp_path: Path) -> None:

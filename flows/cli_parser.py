@@ -1,0 +1,263 @@
+"""The ``bagport`` argument parser: every command, option, default and help text, in one place.
+
+:mod:`flows.cli` wires each command to its handler; the docs' CLI reference (``docs/cli.md``) is
+generated from this parser by :mod:`flows.cli_reference`.
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable, Mapping
+
+from flows.cli_push import add_push_command, add_push_options
+
+__all__ = ["Handler", "build_parser"]
+
+Handler = Callable[[argparse.Namespace], int]
+
+
+def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.ArgumentParser:
+    """The `bagport` argument parser, each command calling ``handlers[<command>]`` (the docs' CLI
+    reference is generated from it)."""
+    parser = argparse.ArgumentParser(prog="bagport", description="ROS bags -> LeRobot v3.0 datasets.")
+    parser.add_argument("--version", action="version", version=f"bagport {version}")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    convert = sub.add_parser(
+        "convert",
+        help="convert the bags of a manifest with a contract (Prefect flow)",
+        description="Runs the Prefect flow: one task per episode (decode, align to the fps grid, encode, QA), "
+        "then the reduce writes the dataset at --output atomically. Every episode is scored by QA: failing "
+        "episodes and bags that cannot be converted are left out and listed (--on-qa-fail). A progress bar "
+        "shows on a terminal from the first second (0/N as soon as the episodes are known); Prefect's console "
+        "lines are off unless --verbose, so each failure prints once (they still reach the Prefect API). The "
+        "last line counts this run's episodes (converted, reused from the staging store, with QA warnings, "
+        "excluded) and what the dataset holds. An --append whose contract gives other features or fps than "
+        "the dataset's meta/info.json is refused before anything converts.",
+    )
+    bags = convert.add_mutually_exclusive_group(required=True)
+    bags.add_argument(
+        "--manifest",
+        help="manifest YAML (bags: [{uri, task, metadata, start_s/end_s or start_ns/end_ns}]); see the "
+        "getting-started page",
+    )
+    bags.add_argument(
+        "--glob", help="every bag matching this glob instead of a manifest, e.g. 's3://fleet/2026-*/*.mcap'"
+    )
+    convert.add_argument("--contract", required=True, help="contract YAML (Rosetta-compatible)")
+    convert.add_argument(
+        "--output",
+        required=True,
+        help="the dataset folder itself (LeRobot's root), local or any fsspec URI (s3://...); it must not exist "
+        "unless --overwrite or --append",
+    )
+    convert.add_argument(
+        "--repo-id",
+        default=None,
+        help="LeRobot repo id recorded for the dataset (default: local/<name of OUT>)",
+    )
+    convert.add_argument(
+        "--staging",
+        default=None,
+        help="staging store URI (default: <output>.staging beside it), removed after success unless "
+        "--keep-staging; after a failure it keeps every finished episode (and each bag's split into episodes) "
+        "and a re-run skips them (same bag files, contract, codec, QA settings, task, --msg-path definitions "
+        "and bagport version)",
+    )
+    convert.add_argument("--workers", type=int, default=None, help="parallel episodes (default: CPU count)")
+    convert.add_argument(
+        "--runner",
+        choices=["process", "thread", "dask", "ray"],
+        default="process",
+        help="process pool (default), threads, Dask (a local cluster of worker processes, or --dask-address) "
+        "or Ray (a local instance of --workers CPUs started for the run, or --ray-address; needs the extra: "
+        "pip install 'bagport[ray]'); an address without its runner is an error (exit code 2)",
+    )
+    convert.add_argument(
+        "--dask-address", default=None, help="existing Dask scheduler, e.g. tcp://10.0.0.5:8786"
+    )
+    convert.add_argument(
+        "--ray-address",
+        default=None,
+        help="existing Ray cluster, e.g. ray://10.0.0.5:10001, or 'auto' (the cluster this machine belongs to)",
+    )
+    convert.add_argument(
+        "--codec",
+        default=None,
+        help="encoder preset name in configs/codecs or a YAML file (default: h264-fast; LeRobot's: lerobot-default)",
+    )
+    convert.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace an existing dataset at --output (the old dataset stays in place until the new one is "
+        "complete)",
+    )
+    convert.add_argument(
+        "--append",
+        action="store_true",
+        help="add the bags not yet in the dataset at --output as new episodes (created if missing); see the "
+        "fleet page",
+    )
+    convert.add_argument("--keep-staging", action="store_true", help="keep staged episodes after success")
+    convert.add_argument(
+        "--chunks-size", type=int, default=1000, help="files per chunk-NNN folder (default: 1000)"
+    )
+    convert.add_argument(
+        "--data-files-size-in-mb", type=float, default=100, help="data file rotation size (default: 100)"
+    )
+    convert.add_argument(
+        "--video-files-size-in-mb", type=float, default=200, help="video file rotation size (default: 200)"
+    )
+    convert.add_argument(
+        "--qa", default=None, help="QA thresholds YAML (default: built-in, see configs/qa.yaml)"
+    )
+    convert.add_argument(
+        "--on-qa-fail",
+        choices=["exclude", "keep", "fail_run"],
+        default=None,
+        help="episodes failing QA or conversion: leave out and list (exclude), keep and flag (keep), or fail "
+        "the run with nothing written (fail_run) (default: the QA file's on_fail, built-in exclude)",
+    )
+    convert.add_argument(
+        "--keep-failed",
+        action="store_true",
+        help="keep episodes labelled failed or discarded by episode events (default: leave them out, listed)",
+    )
+    convert.add_argument(
+        "--fail-fast",
+        action="store_true",
+        help="stop at the first bag that fails to convert, writing nothing (default: report it, convert the others)",
+    )
+    convert.add_argument(
+        "--format",
+        default="lerobot",
+        help="outputs, comma-separated: lerobot (default), hdf5 (ALOHA/ACT layout; extra bagport[hdf5]), robodm "
+        "(Robo-DM trajectories; extra bagport[robodm]); LeRobot's goes to --output, each other one to "
+        "<output>.<format>",
+    )
+    convert.add_argument(
+        "--hdf5-jpeg",
+        type=int,
+        default=None,
+        metavar="QUALITY",
+        help="HDF5 images as JPEG of this quality (1-100), like ALOHA's compressed episodes (default: raw uint8)",
+    )
+    convert.add_argument(
+        "--push-to-hub",
+        action="store_true",
+        help="after converting, push the LeRobot dataset to the Hugging Face Hub as --repo-id (HF_TOKEN from the "
+        "environment; see `bagport push`)",
+    )
+    add_push_options(convert)
+    loudness = convert.add_mutually_exclusive_group()
+    loudness.add_argument(
+        "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
+    )
+    loudness.add_argument("--verbose", action="store_true", help="show Prefect's flow and task logs")
+    convert.set_defaults(func=handlers["convert"])
+
+    qa = sub.add_parser(
+        "qa",
+        help="score bags against a contract without converting them (no video)",
+        description="Scores every episode without converting it (no image decoded, no video encoded): bags are "
+        "split into episodes as `convert` splits them (manifest windows, the contract's episodes section), one "
+        "line per episode (verdict, score, `bags[i] <bag>#<n> (label)`, what failed), an optional "
+        "self-contained HTML report. Exits 1 when an episode that counts fails.",
+    )
+    qa.add_argument("--manifest", required=True)
+    qa.add_argument("--contract", required=True)
+    qa.add_argument("--qa", default=None, help="QA thresholds YAML (default: built-in)")
+    qa.add_argument("--report", default=None, help="write a self-contained HTML report here")
+    qa.add_argument("--workers", type=int, default=None, help="bags scored in parallel (default: CPU count)")
+    qa.add_argument(
+        "--keep-failed",
+        action="store_true",
+        help="score episodes labelled failed or discarded like the others (default: listed as excluded)",
+    )
+    qa.set_defaults(func=handlers["qa"])
+
+    inspect = sub.add_parser(
+        "inspect",
+        help="print what `ros2 bag info` prints, without ROS",
+        description="Prints storage, files, size, duration, start/end, and per topic its type, count and mean "
+        "rate; whether checksums cover its bytes (Checksums:, with a warning naming the recorder setting that "
+        "adds them when none do); any warning about the bag's layout (e.g. a stale metadata.yaml), one line per "
+        "problem; for a remote bag, how it was read and the bytes that cost (an MCAP on S3: its summary only); "
+        "then every topic whose type no source defines.",
+    )
+    inspect.add_argument("uri", nargs="+", help="bag folder, .mcap, .db3 or .bag (local or fsspec URI)")
+    inspect.set_defaults(func=handlers["inspect"])
+
+    validate = sub.add_parser(
+        "validate",
+        help="check checksums, load a dataset with LeRobot and decode every frame",
+        description="Says 'needs repair' if a write into the dataset did not finish; checks every file's "
+        "SHA-256 against the run record (naming a changed, missing or unrecorded file) and the LeRobot v3.0 "
+        "invariants, then loads the dataset with lerobot.LeRobotDataset (offline) and decodes every frame. "
+        "Exits 2 with a precise message on the first violation.",
+    )
+    validate.add_argument("root", help="dataset folder")
+    validate.add_argument("--repo-id", default=None)
+    validate.add_argument(
+        "--every", type=int, default=1, help="decode every n-th frame plus each episode's last (default: all)"
+    )
+    validate.set_defaults(func=handlers["validate"])
+
+    repair = sub.add_parser(
+        "repair",
+        help="finish or undo a write into a dataset that a crash interrupted, and say what was done",
+        description="Finishes or undoes a write into OUT (local or s3://...) that a crash interrupted, from its "
+        "intent record (.bagport-journal.json), and prints what it did (or 'nothing to repair'); also removes "
+        "temporary folders of dead bagport runs. Every convert does the same first, so a scheduled run never "
+        "appends onto an unrecovered dataset.",
+    )
+    repair.add_argument("output", help="dataset folder or URI (as given to convert --output)")
+    repair.set_defaults(func=handlers["repair"])
+
+    add_push_command(sub)
+
+    contract = sub.add_parser("contract", help="work with contracts")
+    contract_sub = contract.add_subparsers(dest="contract_command", required=True)
+    check = contract_sub.add_parser(
+        "check",
+        help="validate a contract, alone or against bags, and print the feature table",
+        description="Validates a contract (file, line, field and fix on error) and prints its feature table: "
+        "key, dtype, shape, names, source topics with strategy/stamp/fill. With --bag, also checks every topic "
+        "exists with the declared type, that selected joints and fields exist in the first messages, and "
+        "resolves shapes and image sizes; the episodes section's event and done-signal topics too.",
+    )
+    check.add_argument("contract", help="contract YAML")
+    check.add_argument("--bag", action="append", help="check against this bag (repeatable)")
+    check.set_defaults(func=handlers["contract check"])
+    init = contract_sub.add_parser(
+        "init",
+        help="draft a contract from a bag's topics, for you to edit",
+        description="Drafts a contract from a bag's topics: cameras -> observation.images.<name>, joint states "
+        "-> observation.state, command-like JointState/Twist topics (cmd, command, target, leader...) and every "
+        "JointTrajectory/MultiDOFCommand topic -> action, prompt-like String topics -> tasks; lists what it did "
+        "not map. Edit it, then `contract check` it.",
+    )
+    init.add_argument("--bag", required=True, help="bag to draft from")
+    init.add_argument("--out", default=None, help="write the draft here (default: print it)")
+    init.add_argument("--robot-type", default="my_robot")
+    init.add_argument("--fps", type=int, default=30)
+    init.set_defaults(func=handlers["contract init"])
+
+    synth = sub.add_parser(
+        "synth",
+        help="write a synthetic fleet of bags with known ground truth",
+        description="Writes a synthetic fleet of bags with known ground truth (MCAP folder, SQLite folder and "
+        "ROS 1 .bag in turn), plus DIR/manifest.yaml.",
+    )
+    synth.add_argument("--out", required=True, help="folder for the bags and manifest.yaml")
+    synth.add_argument("--episodes", type=int, default=4)
+    synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
+    synth.add_argument("--seed", type=int, default=0)
+    synth.set_defaults(func=handlers["synth"])
+    for command in (convert, qa, inspect, check, init):
+        command.add_argument(
+            "--msg-path",
+            default=None,
+            help="folder of .msg files (<pkg>/msg/<Type>.msg) for message types the bags do not embed",
+        )
+    return parser

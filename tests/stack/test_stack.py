@@ -287,8 +287,12 @@ def _check_ui(ui_url: str, ids: dict[str, str], shots: Path) -> None:
             browser.close()
 
 
-def test_the_stack_runs_scheduled_ingestion_and_reconvert(stack: dict[str, str], tmp_path: Path) -> None:
-    os.environ.update({k: v for k, v in stack.items() if k.startswith(("AWS_", "PREFECT_API"))})
+def test_the_stack_runs_scheduled_ingestion_and_reconvert(
+    stack: dict[str, str], tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    for key, value in stack.items():
+        if key.startswith(("AWS_", "PREFECT_API")):
+            monkeypatch.setenv(key, value)  # for this test only: the stack is gone after it
     S3FileSystem.clear_instance_cache()
     fs = S3FileSystem()
     for name in ("day1_a", "day1_b"):

@@ -31,6 +31,7 @@ from tasks.segment import segment_bag_task
 
 __all__ = [
     "ConversionError",
+    "FlowFailedError",
     "RayMissingError",
     "ServerDownError",
     "convert_flow",
@@ -39,8 +40,13 @@ __all__ = [
 ]
 
 
-class ConversionError(BagportError):
-    """One or more bags failed; nothing was written at the output."""
+class ConversionError(QualityError):
+    """``--fail-fast``: a bag failed, the run stopped and nothing was written (exit code 1, by type)."""
+
+
+class FlowFailedError(BagportError):
+    """The conversion flow ended without a result and without one of bagport's errors (crashed or
+    cancelled): its state's message says why."""
 
 
 def _label(uri: str) -> str:
@@ -83,7 +89,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
                     "leave out --fail-fast to convert the others and list the failures."
                 )
                 logger.error("%s", message)
-                return Failed(message=message)
+                return Failed(message=message, data=ConversionError(message))
     else:
         episodes.submit_bags(plan.requests)
     unsegmented = len(failures)  # bags that could not even be split into episodes
@@ -101,7 +107,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
                 "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
             )
             logger.error("%s", message)
-            return Failed(message=message)
+            return Failed(message=message, data=ConversionError(message))
     staged = list(episodes.reused)
     for request, error in episodes.in_plan_order():
         if error is None:
@@ -119,7 +125,12 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger.info("%d episode(s) staged; writing the dataset", len(staged))
     reduced = reduce_task(plan, staged, failures, return_state=True)
     if not reduced.is_completed():
-        return Failed(message=reduced.message or "writing the dataset failed")
+        # the error itself travels as the state's data: the CLI picks its exit code by its type
+        reduce_error = reduced.result(raise_on_failure=False)
+        return Failed(
+            message=reduced.message or "writing the dataset failed",
+            data=reduce_error if isinstance(reduce_error, BagportError) else None,
+        )
     report: DatasetReport = reduced.result()  # type: ignore[assignment] # completed: a report
     publish_run_artifacts(report)
     return completed_state(report)  # "Completed with exclusions" in run lists when bags were left out
@@ -317,8 +328,11 @@ def run_config(config: ConvertConfig) -> DatasetReport:
     flow_with_runner = convert_flow.with_options(task_runner=runner)  # type: ignore[arg-type]
     state = flow_with_runner(config, return_state=True)
     if not state.is_completed():
-        # bagport's own errors arrive as the state message; anything else is a bug worth its traceback
-        raise ConversionError(state.message or f"the conversion flow ended {state.name}")
+        # bagport's own errors arrive typed, as the state's data; anything else is a bug or a crash
+        error = state.result(raise_on_failure=False)
+        if isinstance(error, BagportError):
+            raise error
+        raise FlowFailedError(state.message or f"the conversion flow ended {state.name}")
     result: DatasetReport = state.result()  # type: ignore[assignment] # completed: a report
     return result
 

@@ -25,7 +25,7 @@ def reduce_task(
         report = reduce_run(plan, staged, failures)
     except BagportError as err:
         get_run_logger().error("%s", err)
-        return Failed(message=str(err))
+        return Failed(message=str(err), data=err)  # the error's type decides the CLI's exit code
     logger = get_run_logger()
     logger.info(
         "wrote %d episode(s), %d frames to %s (%d converted now, %d reused from the staging store)",

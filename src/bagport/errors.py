@@ -153,10 +153,10 @@ class DatasetWriteError(BagportError):
 
 
 class QualityError(BagportError):
-    """Episodes failed QA (or conversion) and the QA policy says the run fails.
+    """Episodes failed QA (or conversion) and the QA policy says the run fails (exit code 1).
 
-    The message always contains :attr:`MARKER`, so the CLI can tell this outcome (exit code 1)
-    from bad input (exit code 2) after the error crossed a Prefect state as text.
+    The error crosses the Prefect flow as a failed state's data, so the CLI tells this outcome from bad
+    input (exit code 2) by its type; :attr:`MARKER` is only the wording its messages share.
     """
 
     MARKER = "failed QA or conversion"

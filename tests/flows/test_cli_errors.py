@@ -12,8 +12,11 @@ from pathlib import Path
 
 import pytest
 
+import flows.cli
+from bagport.errors import BagportError, QualityError
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import main
+from flows.convert import ConversionError, FlowFailedError
 from tests.helpers import REPO, SAMPLE_CONTRACT
 
 
@@ -127,3 +130,23 @@ def test_progress_bar_and_loudness_flags(capfd: pytest.CaptureFixture[str]) -> N
         main(["convert", "--manifest", "m", "--contract", "c", "--output", "o", "--quiet", "--verbose"])
     assert info.value.code == 2
     assert "not allowed with argument" in capfd.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("error", "code"),
+    [
+        (QualityError("2 of 3 episodes were left out"), 1),  # no marker phrase in its text
+        (ConversionError("stopped by --fail-fast"), 1),
+        (BagportError("a bad manifest that happens to say failed QA or conversion"), 2),
+        (FlowFailedError("the flow ended Crashed"), 2),
+    ],
+    ids=["quality", "fail-fast", "input-with-the-phrase", "flow-failed"],
+)
+def test_the_exit_code_comes_from_the_error_type_not_its_text(
+    error: BagportError, code: int, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    def fail(_args: object) -> int:
+        raise error
+
+    monkeypatch.setattr(flows.cli, "_cmd_synth", fail)
+    assert main(["synth", "--out", str(tmp_path / "x")]) == code

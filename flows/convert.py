@@ -19,6 +19,7 @@ from bagport.dataset.history import dataset_report
 from bagport.episode import EpisodeRequest
 from bagport.episode.staged import PlannedEpisode, split_staged
 from bagport.errors import BagportError, QualityError
+from bagport.request import EpisodeOutcome
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
@@ -182,13 +183,13 @@ class _Episodes:
             one = convert_episode_task.with_options(
                 tags=_bag_tags(convert_episode_task.tags, self._plan, requests)
             )
-            future = one.submit(requests[0].to_dict(), label=requests[0].name)
+            future = one.submit(requests[0], label=requests[0].name)
         else:
             many = convert_batch_task.with_options(
                 tags=_bag_tags(convert_batch_task.tags, self._plan, requests)
             )
             future = many.submit(
-                [r.to_dict() for r in requests],
+                requests,
                 labels=[r.name for r in requests],
                 label=f"{requests[0].name} +{len(requests) - 1}",
             )
@@ -203,8 +204,8 @@ class _Episodes:
         if not state.is_completed():
             return [(request, state.message or str(state.name), None) for request in batch]
         result = future.result()
-        items = result if isinstance(result, list) else [result]
-        return [(r, item.get("error"), item.get("qa_verdict")) for r, item in zip(batch, items, strict=True)]
+        items: list[EpisodeOutcome] = result if isinstance(result, list) else [result]
+        return [(r, item.error, item.qa_verdict) for r, item in zip(batch, items, strict=True)]
 
     def in_plan_order(self) -> list[tuple[EpisodeRequest, str | None]]:
         """Episodes in manifest order, then in their order inside the bag (not in finishing order),
@@ -237,7 +238,7 @@ def batch_size(episodes: int, workers: int) -> int:
 
 def _submit_segment(plan: RunPlan, request: EpisodeRequest) -> PrefectFuture[Any]:
     task = segment_bag_task.with_options(tags=_bag_tags(segment_bag_task.tags, plan, [request]))
-    return task.submit(request.to_dict(), label=_label(request.bag_uri))
+    return task.submit(request, label=_label(request.bag_uri))
 
 
 def _bag_tags(task_tags: set[str], plan: RunPlan, requests: Sequence[EpisodeRequest]) -> set[str]:
@@ -257,11 +258,11 @@ def _segments_of(
     state = future.state
     if not state.is_completed():
         return [], EpisodeFailure.of(request, state.message or str(state.name))
-    result = future.result()
-    assert isinstance(result, dict)  # completed: the task returned the requests
-    if not result["requests"]:
-        return [], EpisodeFailure.of(request, SegmentedBag((), tuple(result["ignored"])).none_found())
-    return [EpisodeRequest(**item) for item in result["requests"]], None
+    found = future.result()
+    assert isinstance(found, SegmentedBag)  # completed: the task returned the bag's episodes
+    if not found.requests:
+        return [], EpisodeFailure.of(request, found.none_found())
+    return list(found.requests), None
 
 
 def _fail_fast_reason(

@@ -9,8 +9,9 @@ from prefect import Task, get_run_logger, task
 from prefect.client.schemas.objects import State, TaskRun
 from prefect.states import Failed
 
-from bagport.episode import EpisodeRequest, convert_episode
+from bagport.episode import convert_episode
 from bagport.errors import BagportError, TransientError
+from bagport.request import EpisodeOutcome, EpisodeRequest
 from bagport.staging import EpisodeSummary
 
 __all__ = ["BATCH_RETRY_DELAYS_S", "convert_batch_task", "convert_episode_task", "retry_only_transient"]
@@ -38,15 +39,14 @@ def retry_only_transient(_task: Task[Any, Any], _run: TaskRun, state: State[Any]
     retry_condition_fn=retry_only_transient,
     tags=["bagport", "episode"],
 )
-def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any] | State[Any]:
+def convert_episode_task(request: EpisodeRequest, label: str) -> EpisodeOutcome | State[Any]:
     """Returns the staged episode's folder URI and a small summary, never arrays.
 
     A bad bag ends the task run in a Failed state whose message is bagport's one-paragraph
     error (no traceback in the logs); transient I/O errors raise, so Prefect retries them.
     """
-    episode = EpisodeRequest(**request)
     try:
-        summary = convert_episode(episode)
+        summary = convert_episode(request)
     except TransientError:
         raise
     except BagportError as err:
@@ -55,7 +55,7 @@ def convert_episode_task(request: dict[str, Any], label: str) -> dict[str, Any] 
     return _staged(label, summary)
 
 
-def _staged(label: str, summary: EpisodeSummary) -> dict[str, Any]:
+def _staged(label: str, summary: EpisodeSummary) -> EpisodeOutcome:
     """Log a staged episode under its bag's label; the small result the flow gets."""
     read = summary.bag_read
     get_run_logger().info(
@@ -64,14 +64,7 @@ def _staged(label: str, summary: EpisodeSummary) -> dict[str, Any]:
     )  # fmt: skip
     for warning in read.get("warnings", ()):
         get_run_logger().warning("%s: %s", label, warning)
-    return {
-        "episode_id": summary.episode_id,
-        "dir_uri": summary.dir_uri,
-        "bag_uri": summary.bag_uri,
-        "frames": summary.frames,
-        "tasks": list(summary.tasks),
-        "qa_verdict": summary.qa.get("verdict"),
-    }
+    return EpisodeOutcome(summary.episode_id, summary.dir_uri, summary.frames, summary.qa.get("verdict"))
 
 
 @task(
@@ -80,21 +73,18 @@ def _staged(label: str, summary: EpisodeSummary) -> dict[str, Any]:
     tags=["bagport", "episode"],
 )
 def convert_batch_task(
-    requests: list[dict[str, Any]],
+    requests: list[EpisodeRequest],
     labels: list[str],
     label: str,  # noqa: ARG001 - names the task run
-) -> list[dict[str, Any]]:
+) -> list[EpisodeOutcome]:
     """Convert small episodes one after another in one task run (Prefect's cost per task run is
     larger than such an episode's). Each bag keeps its own log lines (prefixed by its label) and its
-    own outcome: a staged-episode result, or ``{"error": <bagport's one-paragraph error>}``; a
+    own outcome: a staged episode, or bagport's one-paragraph error; a
     transient I/O error is retried for that bag alone (:data:`BATCH_RETRY_DELAYS_S`)."""
-    return [
-        _convert_retrying(EpisodeRequest(**request), name)
-        for request, name in zip(requests, labels, strict=True)
-    ]
+    return [_convert_retrying(request, name) for request, name in zip(requests, labels, strict=True)]
 
 
-def _convert_retrying(request: EpisodeRequest, label: str) -> dict[str, Any]:
+def _convert_retrying(request: EpisodeRequest, label: str) -> EpisodeOutcome:
     logger = get_run_logger()
     for delay_s in (*BATCH_RETRY_DELAYS_S, None):
         try:
@@ -102,10 +92,10 @@ def _convert_retrying(request: EpisodeRequest, label: str) -> dict[str, Any]:
         except TransientError as err:
             if delay_s is None:
                 logger.error("%s: %s", label, err)
-                return {"error": str(err)}
+                return EpisodeOutcome(request.episode_id, error=str(err))
             logger.warning("%s: %s; retrying in %d s", label, err, delay_s)
             time.sleep(delay_s)
         except BagportError as err:
             logger.error("%s: %s", label, err)
-            return {"error": str(err)}
+            return EpisodeOutcome(request.episode_id, error=str(err))
     raise AssertionError("unreachable: the last attempt returns")

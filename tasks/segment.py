@@ -10,7 +10,7 @@ from prefect.states import Failed
 
 from bagport.episode import EpisodeRequest
 from bagport.errors import BagportError, TransientError
-from bagport.segment import segment_request
+from bagport.segment import SegmentedBag, segment_request
 from tasks.episode import retry_only_transient
 
 __all__ = ["segment_bag_task"]
@@ -24,10 +24,10 @@ __all__ = ["segment_bag_task"]
     retry_condition_fn=retry_only_transient,
     tags=["bagport", "segment"],
 )
-def segment_bag_task(request: dict[str, Any], label: str) -> dict[str, Any] | State[Any]:
-    """The bag's episode requests (as dicts) and what segmentation left out, with the reasons."""
+def segment_bag_task(request: EpisodeRequest, label: str) -> SegmentedBag | State[Any]:
+    """The bag's episode requests and what segmentation left out, with the reasons."""
     try:
-        found = segment_request(EpisodeRequest(**request))
+        found = segment_request(request)
     except TransientError:
         raise
     except BagportError as err:
@@ -38,4 +38,4 @@ def segment_bag_task(request: dict[str, Any], label: str) -> dict[str, Any] | St
     logger.info("%s: %d episode(s)%s", label, len(found.requests), cached)
     for reason in found.ignored:
         logger.warning("%s: left out %s", label, reason)
-    return {"requests": [r.to_dict() for r in found.requests], "ignored": list(found.ignored)}
+    return found

@@ -13,7 +13,7 @@ from typing import Any
 
 from bagport.align import NS_PER_S
 
-__all__ = ["EpisodeRequest", "episode_id_for"]
+__all__ = ["EpisodeOutcome", "EpisodeRequest", "episode_id_for"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -144,3 +144,17 @@ def episode_id_for(
     stem = bag_uri.rstrip("/").rsplit("/", 1)[-1]
     safe = "".join(c if c.isalnum() or c in "-_." else "_" for c in stem)[:40]
     return f"{safe}-{digest.hexdigest()[:12]}"
+
+
+@dataclass(frozen=True, slots=True)
+class EpisodeOutcome:
+    """What converting one episode gives the flow: where it was staged and its QA verdict, or bagport's
+    one-paragraph error (small and typed: this crosses the task boundary, never arrays)."""
+
+    episode_id: str
+    dir_uri: str | None = None
+    """The staged episode's folder (``None``: the conversion failed)."""
+    frames: int = 0
+    qa_verdict: str | None = None
+    error: str | None = None
+    """bagport's error when the episode could not be converted."""

@@ -14,6 +14,7 @@ import tasks.episode
 from bagport.config import ConvertConfig
 from bagport.episode import EpisodeRequest
 from bagport.errors import BagReadError, TransientError
+from bagport.request import EpisodeOutcome
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from flows.cli import main
@@ -143,11 +144,11 @@ def test_only_transient_errors_are_retried_with_backoff(
 
     monkeypatch.setattr(tasks.episode, "convert_episode", flaky)
     quick = convert_episode_task.with_options(retry_delay_seconds=0)  # the same condition, no waiting
-    request = EpisodeRequest("e", "flaky", 0, str(tmp_path), "", "c.yaml").to_dict()
+    request = EpisodeRequest("e", "flaky", 0, str(tmp_path), "", "c.yaml")
     result = quick(request, label="flaky")
-    assert isinstance(result, dict) and result["frames"] == 3
+    assert isinstance(result, EpisodeOutcome) and result.frames == 3 and result.error is None
     assert calls == ["flaky", "flaky"]  # retried once, then succeeded
     calls.clear()
-    state = quick({**request, "bag_uri": "bad"}, label="bad", return_state=True)
+    state = quick(replace(request, bag_uri="bad"), label="bad", return_state=True)
     assert state.is_failed() and state.message == "bad: not a bag"
     assert calls == ["bad"]  # a bad bag is not retried

@@ -12,18 +12,16 @@ import sys
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
-
-import yaml
+from typing import TYPE_CHECKING
 
 from bagport.errors import BagportError
 from flows import cli_parser
+from flows.cli_config import convert_config
 from flows.cli_push import hf_token, push_from_args
 
 if TYPE_CHECKING:
     import pydantic
 
-    from bagport.config import ConvertConfig
     from bagport.dataset import DatasetReport
 
 __all__ = ["build_parser", "main"]
@@ -52,23 +50,6 @@ def _cmd_inspect(args: argparse.Namespace) -> int:
     return 0
 
 
-def _load_encoder(value: str | None) -> dict[str, Any]:
-    if not value:
-        from bagport.video.settings import default_encoder  # noqa: PLC0415 - keep `--help` fast
-
-        return default_encoder()
-    path = Path(value)
-    if not path.is_file():
-        preset = Path(__file__).resolve().parent.parent / "configs" / "codecs" / f"{value}.yaml"
-        if not preset.is_file():
-            raise BagportError(f"--codec {value!r}: no such file and no preset configs/codecs/{value}.yaml")
-        path = preset
-    data = yaml.safe_load(path.read_text()) or {}
-    if not isinstance(data, dict):
-        raise BagportError(f"--codec {value}: must be a YAML mapping of encoder settings")
-    return data
-
-
 def _progress_bar(done: int, total: int) -> None:
     width = 30
     filled = width * done // max(total, 1)
@@ -94,37 +75,6 @@ def _cmd_convert(args: argparse.Namespace) -> int:
             unused.stop()
 
 
-def _convert_config(args: argparse.Namespace) -> ConvertConfig:
-    from bagport.config import ConvertConfig  # noqa: PLC0415
-
-    return ConvertConfig(
-        manifest=args.manifest,
-        bags_glob=args.glob,
-        append=args.append,
-        contract=args.contract,
-        output=args.output,
-        repo_id=args.repo_id,
-        staging=args.staging,
-        workers=args.workers,
-        runner=args.runner,
-        dask_address=args.dask_address,
-        ray_address=args.ray_address,
-        encoder=_load_encoder(args.codec),
-        overwrite=args.overwrite,
-        keep_staging=args.keep_staging,
-        chunks_size=args.chunks_size,
-        data_files_size_in_mb=args.data_files_size_in_mb,
-        video_files_size_in_mb=args.video_files_size_in_mb,
-        qa=args.qa,
-        on_qa_fail=args.on_qa_fail,
-        keep_failed=args.keep_failed,
-        msg_path=args.msg_path,
-        fail_fast=args.fail_fast,
-        formats=tuple(f.strip() for f in args.format.split(",") if f.strip()),
-        hdf5_jpeg_quality=args.hdf5_jpeg,
-    )
-
-
 def _option_errors(err: pydantic.ValidationError) -> str:
     """Pydantic's findings about the options, one clause each, without its URLs."""
     clauses = []
@@ -143,7 +93,7 @@ def _convert(args: argparse.Namespace) -> int:
     from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
 
     try:
-        config = _convert_config(args)
+        config = convert_config(args, vars(build_parser().parse_args(["convert"])))
     except pydantic.ValidationError as err:
         raise BagportError(f"invalid options: {_option_errors(err)}") from err
     if args.push_to_hub and (

@@ -35,7 +35,13 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
         "excluded) and what the dataset holds. An --append whose contract gives other features or fps than "
         "the dataset's meta/info.json is refused before anything converts.",
     )
-    bags = convert.add_mutually_exclusive_group(required=True)
+    convert.add_argument(
+        "--config",
+        default=None,
+        help="a YAML file of run options, keyed as ConvertConfig's fields (manifest, bags_glob, contract, "
+        "output, runner, workers, codec, formats...); options given on the command line override it",
+    )
+    bags = convert.add_mutually_exclusive_group()
     bags.add_argument(
         "--manifest",
         help="manifest YAML (bags: [{uri, task, metadata, start_s/end_s or start_ns/end_ns}]); see the "
@@ -44,12 +50,13 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
     bags.add_argument(
         "--glob", help="every bag matching this glob instead of a manifest, e.g. 's3://fleet/2026-*/*.mcap'"
     )
-    convert.add_argument("--contract", required=True, help="contract YAML (Rosetta-compatible)")
+    convert.add_argument(
+        "--contract", help="contract YAML (Rosetta-compatible); required (here or in --config)"
+    )
     convert.add_argument(
         "--output",
-        required=True,
         help="the dataset folder itself (LeRobot's root), local or any fsspec URI (s3://...); it must not exist "
-        "unless --overwrite or --append",
+        "unless --overwrite or --append; required (here or in --config)",
     )
     convert.add_argument(
         "--repo-id",

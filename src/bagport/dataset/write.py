@@ -18,10 +18,11 @@ from bagport.dataset.checksums import record_checksums
 from bagport.dataset.data_files import write_data_files
 from bagport.dataset.meta import DatasetLimits, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import run_record_path, write_provenance
-from bagport.dataset.publish import building_beside, commit_append, swap_into_place
+from bagport.dataset.publish import building_beside, commit_append
 from bagport.dataset.qa import add_fleet_checks, write_qa
-from bagport.dataset.remote import append_remote, publish_remote
+from bagport.dataset.remote import append_remote
 from bagport.dataset.repair import repair_dataset
+from bagport.dataset.replace import publish_built, refuse_existing
 from bagport.dataset.sketches import DatasetSketches
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
@@ -248,25 +249,8 @@ def write_dataset(
                 report = append_remote(output, build, scratch)
             return replace(report, root=output, size_bytes=int(fs.du(out_path)))
         return _append(Path(out_path), build)
-    if fs.exists(out_path) and not overwrite:
-        raise DatasetWriteError(
-            f"{output} already exists; nothing was written. Fix: choose a new --output, or pass --overwrite "
-            "to replace it (the old dataset is kept until the new one is complete)."
-        )
-    if is_local(fs):
-        final = Path(out_path)
-        with building_beside(final) as build_root:
-            report = build(build_root)
-            swap_into_place(build_root, final)
-    else:
-        with scratch_folder("dataset") as scratch:
-            build_root = scratch / "dataset"
-            build_root.mkdir()
-            report = build(build_root)
-            files = sorted(p.relative_to(build_root).as_posix() for p in build_root.rglob("*") if p.is_file())
-            existing = {p[len(out_path.rstrip("/")) + 1 :] for p in fs.find(out_path)}
-            stale = sorted(existing - set(files))
-            publish_remote(build_root, output, files, stale)
+    refuse_existing(output, overwrite=overwrite)
+    report = publish_built(output, build)
     return replace(report, root=output)
 
 

@@ -24,12 +24,40 @@ from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, PROVENANCE_PATH, RUN_RECORD_PATH
 from bagport.staging import PROVENANCE_FILE, EpisodeSummary
 
-__all__ = ["run_record_path", "write_provenance"]
+__all__ = ["episode_provenance", "run_record_path", "write_provenance"]
 
 
 def run_record_path(base: DatasetBase | None) -> str:
     """This run's record, relative to the dataset root (``run.json``; an append's ``run-NNN.json``)."""
     return RUN_RECORD_PATH if base is None else APPEND_RUN_RECORD_PATH.format(run=base.run_number)
+
+
+def episode_provenance(s: EpisodeSummary, i: int) -> dict[str, Any]:
+    """Where episode ``i`` came from (its entry in ``meta/provenance/run.json``; other formats write it too)."""
+    return {
+        "episode_index": i,
+        "bag_uri": s.bag_uri,
+        "storage": s.storage,
+        "bag_size_bytes": s.bag_size_bytes,
+        "bag_fingerprint": s.bag_fingerprint,
+        "source_stamp": s.source_stamp,
+        "bag_read": s.bag_read,
+        "manifest_entry": s.manifest_entry,
+        "staged_episode_id": s.episode_id,
+        "frames": s.frames,
+        "first_tick_ns": s.first_tick_ns,
+        "last_tick_ns": s.last_tick_ns,
+        "task_source": s.task_source,
+        "stamp_sources": s.stamp_sources,
+        "alignment": s.alignment,
+        "qa": s.qa,
+        "metadata": s.metadata,
+        "segment": s.segment,
+        "window_ns": list(s.window_ns) if s.window_ns is not None else None,
+        "label": s.label,
+        "label_note": s.note,
+        "reused_clips": dict(s.reused_clips),  # camera key -> the staged episode its clip came from
+    }
 
 
 def write_provenance(
@@ -65,32 +93,6 @@ def write_provenance(
     finally:
         if writer is not None:
             writer.close()
-    episodes = [
-        {
-            "episode_index": i,
-            "bag_uri": s.bag_uri,
-            "storage": s.storage,
-            "bag_size_bytes": s.bag_size_bytes,
-            "bag_fingerprint": s.bag_fingerprint,
-            "source_stamp": s.source_stamp,
-            "bag_read": s.bag_read,
-            "manifest_entry": s.manifest_entry,
-            "staged_episode_id": s.episode_id,
-            "frames": s.frames,
-            "first_tick_ns": s.first_tick_ns,
-            "last_tick_ns": s.last_tick_ns,
-            "task_source": s.task_source,
-            "stamp_sources": s.stamp_sources,
-            "alignment": s.alignment,
-            "qa": s.qa,
-            "metadata": s.metadata,
-            "segment": s.segment,
-            "window_ns": list(s.window_ns) if s.window_ns is not None else None,
-            "label": s.label,
-            "label_note": s.note,
-            "reused_clips": dict(s.reused_clips),  # camera key -> the staged episode its clip came from
-        }
-        for i, s in enumerate(summaries, first_episode)
-    ]
+    episodes = [episode_provenance(s, i) for i, s in enumerate(summaries, first_episode)]
     record = {**run_record, "episodes": episodes}
     (root / run_record_path(base)).write_text(json.dumps(record, indent=2, default=str))

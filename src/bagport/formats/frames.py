@@ -17,6 +17,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
+from bagport.dataset.provenance import episode_provenance
 from bagport.errors import DatasetWriteError
 from bagport.staging import FRAMES_FILE, PROVENANCE_FILE, EpisodeSummary
 
@@ -109,25 +110,10 @@ def iter_video_frames(summary: EpisodeSummary, key: str) -> Iterator[npt.NDArray
 
 
 def episode_record(summary: EpisodeSummary, episode_index: int) -> dict[str, Any]:
-    """Where the episode came from, as written beside it in every format (the per-episode part of
-    ``meta/provenance/run.json``)."""
+    """Where the episode came from, as written beside it in every format: its entry in
+    ``meta/provenance/run.json``, with the bagport version and contract that staged it."""
     return {
-        "episode_index": episode_index,
-        "bag_uri": summary.bag_uri,
-        "storage": summary.storage,
-        "bag_fingerprint": summary.bag_fingerprint,
-        "source_stamp": summary.source_stamp,
-        "manifest_entry": summary.manifest_entry,
-        "first_tick_ns": summary.first_tick_ns,
-        "last_tick_ns": summary.last_tick_ns,
-        "window_ns": list(summary.window_ns) if summary.window_ns is not None else None,
-        "segment": summary.segment,
-        "label": summary.label,
-        "label_note": summary.note,
-        "metadata": summary.metadata,
-        "stamp_sources": summary.stamp_sources,
-        "task_source": summary.task_source,
+        **episode_provenance(summary, episode_index),
         "bagport_version": summary.bagport_version,
         "contract_sha256": summary.contract_sha256,
-        "qa": summary.qa,
     }

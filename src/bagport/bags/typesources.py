@@ -25,6 +25,7 @@ from rosbags.interfaces import Nodetype
 from rosbags.typesys import TypesysError, get_types_from_msg
 from rosbags.typesys.store import Typestore
 
+from bagport.bags.typeload import one_line
 from bagport.errors import BagReadError, DecodeError
 
 __all__ = [
@@ -92,7 +93,7 @@ def parse_msg_definitions(definitions: Mapping[str, str], source: str = "--msg-p
             typs.update(get_types_from_msg(text, name))
         except (TypesysError, ValueError) as err:
             raise BagReadError(
-                f"the definition of {name} cannot be parsed ({' '.join(str(err).split())})",
+                f"the definition of {name} cannot be parsed ({one_line(err)})",
                 uri=source,
                 fix=f"fix the file {name}.msg (ROS 2 .msg syntax).",
             ) from err

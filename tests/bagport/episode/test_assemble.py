@@ -10,16 +10,21 @@ from typing import Any
 import numpy as np
 import pytest
 import yaml
+from rosbags.rosbag2 import Writer
+from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags import BagMessage, open_bag
 from bagport.contract import parse_contract
 from bagport.decode import ImageKind
+from bagport.episode import convert_episode
 from bagport.episode.alignment import Alignment
 from bagport.episode.assemble import iter_frames
 from bagport.episode.prepare import prepare_episode
+from bagport.errors import DecodeError
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import episode_request
 
+NS = 1_000_000_000
 H, W = 24, 32
 DEPTH = CameraSpec("depth", "raw", "16UC1", height=H, width=W)
 COLOUR = CameraSpec("front", "raw", "bgr8", height=H, width=W)
@@ -111,3 +116,57 @@ def test_frames_come_one_at_a_time_from_the_stream(tmp_path: Path, monkeypatch: 
         assert first.index == 0
         assert read and max(read) < int(alignment.ticks_ns[5])
         assert sum(1 for _ in frames) == alignment.frames - 1
+
+
+def _write_mixed_camera_bag(path: Path, frames: int) -> None:
+    """``/cam`` at 30 Hz: depth (16UC1) for the first half of its messages, then colour (rgb8)."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    types: Any = store.types
+    start_ns = 1_700_000_000 * NS
+    writer = Writer(path, version=9)
+    writer.open()
+    conn = writer.add_connection("/cam", "sensor_msgs/msg/Image", typestore=store)
+    for i in range(frames):
+        stamp_ns = start_ns + i * NS // 30
+        depth = i < frames // 2
+        pixels = np.full((H, W), 1000, np.uint16) if depth else np.full((H, W, 3), 100, np.uint8)
+        msg = types["sensor_msgs/msg/Image"](
+            header=types["std_msgs/msg/Header"](
+                stamp=types["builtin_interfaces/msg/Time"](sec=stamp_ns // NS, nanosec=stamp_ns % NS),
+                frame_id="cam",
+            ),
+            height=H,
+            width=W,
+            encoding="16UC1" if depth else "rgb8",
+            is_bigendian=0,
+            step=W * (2 if depth else 3),
+            data=pixels.view(np.uint8).ravel(),
+        )
+        writer.write(conn, stamp_ns, store.serialize_cdr(msg, "sensor_msgs/msg/Image"))
+    writer.close()
+
+
+def test_a_camera_whose_messages_turn_from_depth_to_colour_is_refused_where_it_turns(tmp_path: Path) -> None:
+    bag = tmp_path / "bag"
+    _write_mixed_camera_bag(bag, 12)
+    text = yaml.safe_dump(
+        {
+            "robot_type": "r",
+            "fps": 30,
+            "default_task": "t",
+            "observations": [
+                {"key": "observation.images.cam", "topic": "/cam", "type": "sensor_msgs/msg/Image"}
+            ],
+        }
+    )
+    with pytest.raises(DecodeError) as caught:
+        convert_episode(episode_request(bag, tmp_path / "st", text))
+    err = caught.value
+    assert (
+        "observation.images.cam: this message decodes as a colour image, the messages before were depth"
+        in str(err)
+    )
+    assert err.topic == "/cam"
+    assert err.t_ns == 1_700_000_000 * NS + 6 * NS // 30  # the first colour message
+    assert "contract.yaml:" in str(err) and "Fix: map depth and colour topics to different keys" in str(err)
+    assert not (tmp_path / "st").exists() or not any((tmp_path / "st").rglob("episode.json"))

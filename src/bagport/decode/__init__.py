@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from bagport.decode.custom import CustomDecoder, register_decoder, registered_decoder, resolve_decoder
-from bagport.decode.image import decode_image, image_channels, is_depth
+from bagport.decode.image import ImageKind, decode_image, image_channels, is_depth
 from bagport.decode.paths import VectorExtractor, field_at
 from bagport.decode.resize import resize_image, resize_rgb
 from bagport.decode.tf import child_frames, find_transform, transform_stamp_ns
@@ -11,6 +11,7 @@ from bagport.decode.vector import make_extractor
 
 __all__ = [
     "CustomDecoder",
+    "ImageKind",
     "VectorExtractor",
     "child_frames",
     "decode_image",

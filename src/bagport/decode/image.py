@@ -12,6 +12,7 @@ first). Depth encodings come out float32 metres with NaN for invalid
 from __future__ import annotations
 
 import io
+from enum import Enum
 from typing import Any
 
 import numpy as np
@@ -24,7 +25,7 @@ from bagport.decode.depth import DEPTH_ENCODINGS, decode_compressed_depth, depth
 from bagport.errors import DecodeError
 from bagport.msgtypes import RosType
 
-__all__ = ["RawEncoding", "decode_image", "image_channels", "is_depth"]
+__all__ = ["ImageKind", "RawEncoding", "decode_image", "image_channels", "is_depth"]
 
 Rgb = npt.NDArray[np.uint8]
 
@@ -64,14 +65,34 @@ _JPEG_MAGIC = b"\xff\xd8"
 _PNG_MAGIC = b"\x89PNG"
 
 
+class ImageKind(Enum):
+    """What a camera's frames are: RGB uint8 (H, W, 3), or depth float32 metres (H, W).
+
+    Decided once per camera (from its first message, :meth:`of`) and carried from there on.
+    """
+
+    COLOUR = "colour"
+    DEPTH = "depth"
+
+    @classmethod
+    def of(cls, image: npt.NDArray[Any]) -> ImageKind:
+        """The kind of a decoded frame (:func:`decode_image`'s output)."""
+        return cls.DEPTH if image.ndim == 2 else cls.COLOUR
+
+    @property
+    def channels(self) -> int:
+        """Channels of the feature a camera of this kind becomes: 1 for depth, 3 for RGB."""
+        return 1 if self is ImageKind.DEPTH else 3
+
+
 def is_depth(image: npt.NDArray[Any]) -> bool:
     """Whether a decoded frame is a depth map (float32 metres, one channel) rather than RGB."""
-    return image.ndim == 2
+    return ImageKind.of(image) is ImageKind.DEPTH
 
 
 def image_channels(image: npt.NDArray[Any]) -> int:
     """Channels of the feature a decoded frame becomes: 1 for depth, 3 for RGB."""
-    return 1 if is_depth(image) else 3
+    return ImageKind.of(image).channels
 
 
 def _to_8bit(grey16: npt.NDArray[np.uint16]) -> npt.NDArray[np.uint8]:

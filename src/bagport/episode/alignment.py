@@ -7,6 +7,8 @@ goes into the episode summary, the provenance log and the QA record (:func:`bagp
 
 from __future__ import annotations
 
+from collections.abc import Collection
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -23,16 +25,46 @@ from bagport.align import (
     select_for_ticks,
     select_hold,
 )
-from bagport.contract import ContractPlan, SourceSpec
+from bagport.contract import ContractPlan, FeatureKind, SourceSpec
 from bagport.contract.model import StampSource
-from bagport.episode.assemble import AlignedSource
 from bagport.episode.timeline import Timeline, TopicTimeline
 from bagport.errors import AlignmentError
 
-__all__ = ["align_sources"]
+__all__ = ["AlignedSource", "Alignment", "align_sources"]
 
 Int64Array = npt.NDArray[np.int64]
 BoolArray = npt.NDArray[np.bool_]
+
+
+@dataclass(frozen=True, slots=True)
+class AlignedSource:
+    """One contract source with its per-tick message selection (decided before streaming)."""
+
+    src: SourceSpec
+    kind: FeatureKind
+    timeline: TopicTimeline
+    stamp_used: str
+    selection: Selection
+    filled: BoolArray
+    """Ticks whose value comes from ``align.fill`` (held past a gap, or zeros)."""
+
+
+@dataclass(frozen=True, slots=True)
+class Alignment:
+    """Which message feeds every tick of every source, the ticks, and how well they line up."""
+
+    sources: tuple[AlignedSource, ...]
+    ticks_ns: Int64Array
+    report: tuple[dict[str, Any], ...]
+    """Per source: stamp, strategy, fill, alignment error (ms), held/interpolated/filled/dropped frames."""
+
+    @property
+    def frames(self) -> int:
+        return int(self.ticks_ns.size)
+
+    def of(self, keys: Collection[str]) -> tuple[AlignedSource, ...]:
+        """The sources of the features ``keys``, in contract order."""
+        return tuple(s for s in self.sources if s.src.key in keys)
 
 
 def _stamp_source(src: SourceSpec, topic: TopicTimeline, uri: str) -> StampSource:
@@ -167,9 +199,39 @@ def _report(
     }
 
 
-def align_sources(
-    plan: ContractPlan, timeline: Timeline, uri: str
-) -> tuple[list[AlignedSource], Int64Array, list[dict[str, Any]]]:
+def _select(
+    src: SourceSpec, stamps: Int64Array, ticks: Int64Array, fps: int, uri: str
+) -> tuple[Selection, BoolArray, BoolArray]:
+    """One source's selection per tick, its filled ticks, and the ticks it drops (``drop_frame``)."""
+    targets = ticks + src.offset_ns
+    sel = select_for_ticks(stamps, targets, strategy=src.strategy, fps=fps, tol_ms=src.tol_ms)
+    filled: BoolArray = np.zeros(ticks.size, dtype=np.bool_)
+    dropped: BoolArray = np.zeros(ticks.size, dtype=np.bool_)
+    missing = sel.missing
+    if not missing.any():
+        return sel, filled, dropped
+    if src.fill == "fail":
+        raise _missing_error(src, missing, ticks, uri, _why_missing(src, stamps, fps))
+    if src.fill == "hold":
+        sel, filled = hold_fill(sel, select_hold(stamps, targets))
+        if sel.missing.any():
+            raise _missing_error(src, sel.missing, ticks, uri, " and nothing earlier to hold")
+    elif src.fill == "zeros":
+        filled = missing
+    else:  # drop_frame
+        dropped = missing
+    return sel, filled, dropped
+
+
+def _ticks(plan: ContractPlan, chosen: list[_Chosen], uri: str) -> tuple[Int64Array, dict[str, Any] | None]:
+    """The frame ticks: the fixed grid over the window every stream has data in, or the clock's messages."""
+    start_ns, end_ns = _window(chosen, uri)
+    if plan.clock is None:
+        return grid_ticks_ns(start_ns, end_ns, plan.fps), None
+    return _clock_ticks(plan, chosen, start_ns, end_ns, uri)
+
+
+def align_sources(plan: ContractPlan, timeline: Timeline, uri: str) -> Alignment:
     """Sources with their per-tick selections, the tick times, and the alignment report.
 
     Each source is sampled at ``tick + offset_ns`` (``action_offset_ms`` on actions).  The ticks
@@ -183,48 +245,27 @@ def align_sources(
             topic = timeline.topics[src.stream]
             chosen.append((src, topic, _stamp_source(src, topic, uri)))
             kinds.append(feature.kind)
-    start_ns, end_ns = _window(chosen, uri)
-    clock: dict[str, Any] | None = None
-    if plan.clock is None:
-        ticks = grid_ticks_ns(start_ns, end_ns, plan.fps)
-    else:
-        ticks, clock = _clock_ticks(plan, chosen, start_ns, end_ns, uri)
-    selections: list[tuple[Selection, BoolArray]] = []
+    ticks, clock = _ticks(plan, chosen, uri)
+    selections = [_select(src, topic.stamps(stamp), ticks, plan.fps, uri) for src, topic, stamp in chosen]
     keep: BoolArray = np.ones(ticks.size, dtype=np.bool_)
-    for src, topic, stamp in chosen:
-        stamps, targets = topic.stamps(stamp), ticks + src.offset_ns
-        sel = select_for_ticks(stamps, targets, strategy=src.strategy, fps=plan.fps, tol_ms=src.tol_ms)
-        filled: BoolArray = np.zeros(ticks.size, dtype=np.bool_)
-        missing = sel.missing
-        if missing.any():
-            if src.fill == "fail":
-                raise _missing_error(src, missing, ticks, uri, _why_missing(src, stamps, plan.fps))
-            if src.fill == "hold":
-                sel, filled = hold_fill(sel, select_hold(stamps, targets))
-                if sel.missing.any():
-                    raise _missing_error(src, sel.missing, ticks, uri, " and nothing earlier to hold")
-            elif src.fill == "zeros":
-                filled = missing
-            else:  # drop_frame
-                keep &= ~missing
-        selections.append((sel, filled))
+    for _, _, dropped in selections:
+        keep &= ~dropped
     if not keep.any():
         raise AlignmentError(
             "align.fill 'drop_frame' dropped every frame", uri=uri, fix="check the alignment settings."
         )
-    dropped = int((~keep).sum())
+    dropped_frames = int((~keep).sum())
     ticks_kept = ticks[keep]
     sources: list[AlignedSource] = []
     report: list[dict[str, Any]] = []
-    clock_reported = False
-    for (src, topic, stamp), kind, (sel, filled) in zip(chosen, kinds, selections, strict=True):
-        kept, kept_filled = sel.take(keep), filled[keep]
-        sources.append(AlignedSource(src, kind, topic, stamp, kept, kept_filled))
+    for (src, topic, stamp), kind, (sel, filled, _) in zip(chosen, kinds, selections, strict=True):
+        source = AlignedSource(src, kind, topic, stamp, sel.take(keep), filled[keep])
+        sources.append(source)
         entry = _report(
-            src, stamp, topic.stamps(stamp), kept, kept_filled, ticks_kept + src.offset_ns, plan.fps, dropped
-        )
-        if clock is not None and src.key == clock["key"] and not clock_reported:
+            src, stamp, topic.stamps(stamp), source.selection, source.filled,
+            ticks_kept + src.offset_ns, plan.fps, dropped_frames,
+        )  # fmt: skip
+        if clock is not None and src.key == clock["key"] and not any("clock" in e for e in report):
             entry["clock"] = clock
-            clock_reported = True
         report.append(entry)
-    return sources, ticks_kept, report
+    return Alignment(tuple(sources), ticks_kept, tuple(report))

@@ -4,13 +4,12 @@ from __future__ import annotations
 
 import hashlib
 
-from bagport.bags import BagInfo, BagReader, BagWindow
+from bagport.bags import BagInfo
 from bagport.contract import ContractPlan, normalize_msgtype
-from bagport.episode.timeline import Timeline, scan_plan_timeline
+from bagport.episode.timeline import Timeline
 from bagport.errors import AlignmentError, ContractError
-from bagport.request import EpisodeRequest
 
-__all__ = ["bag_fingerprint", "check_bag_fits", "check_window_has_data", "scan_episode"]
+__all__ = ["bag_fingerprint", "check_bag_fits", "check_window_has_data"]
 
 
 def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
@@ -69,21 +68,6 @@ def check_window_has_data(
                 topic=topic.topic,
                 fix="check the window (manifest start_s/end_s or start_ns/end_ns, or the episode events).",
             )
-
-
-def scan_episode(
-    whole: BagReader, plan: ContractPlan, request: EpisodeRequest
-) -> tuple[BagReader, Timeline, tuple[int, int] | None]:
-    """The request's episode of an open bag: a reader of its window (the whole bag without one), its
-    timeline and the window, once the bag fits the contract and every stream has data in the window."""
-    info = whole.info
-    check_bag_fits(info, plan)
-    window = request.window_ns(info.start_ns, info.end_ns)
-    reader: BagReader = whole if window is None else BagWindow(whole, *window)
-    timeline = scan_plan_timeline(whole, plan, window)
-    if window is not None:
-        check_window_has_data(timeline, window, info.start_ns, request.bag_uri)
-    return reader, timeline, window
 
 
 def bag_fingerprint(info: BagInfo) -> str:

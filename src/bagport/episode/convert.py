@@ -1,4 +1,11 @@
-"""Convert one bag into a staged episode artifact (see :mod:`bagport.staging`)."""
+"""Convert one bag into a staged episode artifact (see :mod:`bagport.staging`).
+
+The steps, each a library function: :func:`~bagport.episode.prepare.prepare_episode` (the bag fits
+the contract, pass 1, alignment), :func:`~bagport.episode.assemble.iter_frames` (pass 2) into
+:class:`~bagport.episode.sinks.EpisodeSinks`, :func:`~bagport.episode.quality.assess_episode`, then
+the staged files, ``episode.json`` last. ``bagport qa`` (:mod:`bagport.episode.score`) runs the same
+steps with QA's value monitor as the only sink.
+"""
 
 from __future__ import annotations
 
@@ -8,31 +15,27 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
-import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport import __version__
 from bagport.bags import open_bag, source_stamp
-from bagport.columns import vector_column
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
-from bagport.episode.alignment import align_sources
-from bagport.episode.assemble import AlignedSource, Frame, assemble_frames
-from bagport.episode.cameras import CameraSink
-from bagport.episode.checks import bag_fingerprint, scan_episode
+from bagport.episode.alignment import Alignment
+from bagport.episode.assemble import iter_frames
+from bagport.episode.checks import bag_fingerprint
 from bagport.episode.fidelity import EpisodeFidelity
-from bagport.episode.quality import assess_episode, integrity_check, safety_check, task_check
+from bagport.episode.prepare import PreparedEpisode, prepare_episode
+from bagport.episode.quality import assess_episode, bag_checks
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
-from bagport.episode.sinks import FrameTableWriter, write_provenance
+from bagport.episode.sinks import EpisodeSinks, write_provenance
 from bagport.episode.staged import PlannedEpisode, matches
 from bagport.episode.tasks import resolve_tasks
 from bagport.episode.video import skipped_packet_checks
-from bagport.errors import DecodeError
 from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.request import EpisodeRequest
 from bagport.scratch import clean_dead_scratch, scratch_dir
 from bagport.staging import (
     EPISODE_SUMMARY,
-    FRAMES_FILE,
     PROVENANCE_FILE,
     QA_FILE,
     STATS_FILE,
@@ -43,61 +46,27 @@ from bagport.staging import (
     staged_path,
     write_json,
 )
-from bagport.stats import episode_sketch_fields, stats_to_json, vector_stats
-from bagport.video import EncoderSettings
+from bagport.video import ClipInfo, EncoderSettings
 
 __all__ = ["convert_episode"]
 
 
-@dataclass
-class _EpisodeSinks:
-    workdir: Path
+@dataclass(frozen=True, slots=True)
+class _Episode:
+    """What one conversion decided before streaming: the request, the contract and the prepared bag."""
+
+    request: EpisodeRequest
     plan: ContractPlan
     settings: EncoderSettings
+    qa_config: QAConfig
+    stamp: str
+    prepared: PreparedEpisode
     frame_tasks: list[str]
-    monitor: ValueMonitor
-    fidelity: EpisodeFidelity
-
-    def __post_init__(self) -> None:
-        vector_dtypes = {f.key: f.dtype for f in self.plan.features if f.kind is FeatureKind.VECTOR}
-        (self.workdir / "videos").mkdir(parents=True, exist_ok=True)
-        self.frames = FrameTableWriter(self.workdir / FRAMES_FILE, self.plan.fps, vector_dtypes)
-        self.cameras: dict[str, CameraSink] = {}
-        self.widths: dict[str, int] = {}
-        self._camera_sources = {
-            f.key: f.sources[0] for f in self.plan.features if f.kind is FeatureKind.VIDEO
-        }
-
-    def on_frame(self, frame: Frame) -> None:
-        for key, image in frame.images.items():
-            camera = self.cameras.get(key)
-            if camera is None:
-                camera = CameraSink(
-                    self.workdir / "videos" / f"{key}.mp4",
-                    self._camera_sources[key],
-                    image,
-                    self.plan.fps,
-                    self.settings,
-                    self.fidelity,
-                    self.monitor,
-                )
-                self.cameras[key] = camera
-            camera.write(frame.index, image)
-        for key, vec in frame.vectors.items():
-            width = self.widths.setdefault(key, vec.shape[0])
-            if vec.shape[0] != width:
-                raise DecodeError(
-                    f"{key!r} has {vec.shape[0]} values at frame {frame.index}, {width} before",
-                    t_ns=frame.tick_ns,
-                    fix="select a fixed set of dimensions with selector.names.",
-                )
-        self.monitor.add_vectors(frame.index, frame.vectors)
-        self.frames.add(frame.index, self.frame_tasks[frame.index], frame.vectors)
-
-    def close(self) -> dict[str, Any]:
-        """Close every writer; returns video clip infos by key."""
-        self.frames.close()
-        return {key: camera.close() for key, camera in self.cameras.items()}
+    task_source: str
+    clip_keys: dict[str, str]
+    reused: dict[str, ReusedClip]
+    """Cameras this contract change does not touch: copied from an earlier staged episode."""
+    workdir: Path
 
 
 def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
@@ -114,105 +83,115 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         return reusable
     clean_dead_scratch()  # a worker on another host cleans after its own killed predecessors
     with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as whole:
-        info = whole.info
-        reader, timeline, window = scan_episode(whole, plan, request)
-        sources, ticks, alignment = align_sources(plan, timeline, request.bag_uri)
+        prepared = prepare_episode(whole, plan, request)
+        alignment = prepared.alignment
         frame_tasks, task_source = resolve_tasks(
-            timeline.tasks, ticks, info.custom_data, request, plan.contract.default_task
-        )
-        keys = clip_keys(request, stamp, plan.fps, sources, ticks)
-        reused = find_reusable_clips(request, keys)  # cameras this contract change does not touch
+            prepared.timeline.tasks, alignment.ticks_ns, whole.info.custom_data, request,
+            plan.contract.default_task,
+        )  # fmt: skip
+        keys = clip_keys(request, stamp, plan.fps, alignment)
         workdir = scratch_dir("episode")
         try:
-            qa_config = QAConfig.model_validate(request.qa)
-            monitor = ValueMonitor(qa_config.values, plan.fps, int(ticks.size))
-            fidelity = EpisodeFidelity(qa_config.video, workdir / "fidelity-refs", settings.g or 1)
-            sinks = _EpisodeSinks(workdir, plan, settings, frame_tasks, monitor, fidelity)
-            try:
-                assemble_frames(
-                    reader,
-                    request.bag_uri,
-                    [f for f in plan.features if f.key not in reused],
-                    [s for s in sources if s.src.key not in reused],  # a reused camera is not even read
-                    ticks,
-                    sinks.on_frame,
-                    plan.source_name,
-                    whole,
-                )
-            finally:
-                clips = sinks.close()
-            video_checks, video_plots = fidelity.check(clips, plan.fps)  # before publishing: refs are scratch
-            extra_plots = _take_reused(workdir, reused, video_checks, video_plots, monitor)
-            write_provenance(workdir / PROVENANCE_FILE, sources, ticks)
-            extra = [
-                *safety_check(reader, qa_config, int(ticks[0]), int(ticks[-1])),
-                *integrity_check(info, qa_config),
-                task_check(qa_config, frame_tasks),
-                *video_checks,
-                *skipped_packet_checks(
-                    {
-                        t.topic: t.skipped_packets
-                        for t in timeline.topics.values()
-                        if t.skipped_packets is not None
-                    }
-                ),
-            ]
-            qa = assess_episode(
-                request.bag_uri, qa_config, timeline, sources, ticks, monitor, extra, plan.fps,
-                extra_plots=extra_plots, alignment=alignment,
+            episode = _Episode(
+                request, plan, settings, QAConfig.model_validate(request.qa),
+                stamp, prepared, frame_tasks, task_source, keys, find_reusable_clips(request, keys), workdir,
             )  # fmt: skip
-            (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
-            features = _staged_features(plan, sources, sinks, clips, reused)
-            stats: dict[str, Any] = {}
-            table = pq.read_table(
-                workdir / FRAMES_FILE, columns=[f.key for f in features if f.video_info is None]
-            )
-            for name in table.column_names:
-                values = vector_column(table, name)
-                stats[name] = {**stats_to_json(vector_stats(values)), **episode_sketch_fields(values)}
-            for key, camera in sinks.cameras.items():
-                acc = camera.stats
-                stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
-            stats.update({key: clip.stats for key, clip in reused.items()})
-            (workdir / STATS_FILE).write_text(json.dumps(stats))
-            target = episode_dir(request.staging_uri, request.episode_id)
-            summary = EpisodeSummary(
-                episode_id=request.episode_id,
-                dir_uri=target,
-                bag_uri=request.bag_uri,
-                storage=str(info.storage),
-                bag_size_bytes=info.size_bytes,
-                bag_fingerprint=bag_fingerprint(info),
-                manifest_entry=request.manifest_entry,
-                fps=plan.fps,
-                frames=int(ticks.size),
-                first_tick_ns=int(ticks[0]),
-                last_tick_ns=int(ticks[-1]),
-                tasks=tuple(dict.fromkeys(frame_tasks)),
-                task_source=task_source,
-                features=features,
-                stamp_sources={f"{s.src.key}@{s.src.topic}": s.stamp_used for s in sources},
-                videos={f.key: f"videos/{f.key}.mp4" for f in features if f.video_info is not None},
-                metadata=dict(request.metadata),
-                window_ns=window,
-                segment=request.segment,
-                label=request.label,
-                note=request.note,
-                bagport_version=__version__,
-                contract_sha256=request.contract_sha256,
-                source_stamp=stamp,
-                default_task=request.default_task,
-                alignment=alignment,
-                qa=qa_brief(qa),
-                qa_sha256=request.qa_sha256,
-                bag_read={**reader.transfer.to_dict(), "warnings": list(info.warnings)},
-                clip_keys=keys,
-                reused_clips={key: clip.episode_id for key, clip in reused.items()},
-            )
-            _publish(workdir, target, summary)
+            summary = _stage(episode)
         finally:
             shutil.rmtree(workdir, ignore_errors=True)
     return summary
+
+
+def _stage(episode: _Episode) -> EpisodeSummary:
+    """Stream the episode into its sinks, score it, and publish the staged artifact."""
+    plan, workdir, alignment = episode.plan, episode.workdir, episode.prepared.alignment
+    monitor = ValueMonitor(episode.qa_config.values, plan.fps, alignment.frames)
+    gop = episode.settings.g or 1
+    fidelity = EpisodeFidelity(episode.qa_config.video, workdir / "fidelity-refs", gop)
+    sinks = EpisodeSinks(workdir, plan, episode.settings, episode.frame_tasks, monitor, fidelity)
+    features = [f for f in plan.features if f.key not in episode.reused]
+    try:
+        for frame in iter_frames(
+            episode.prepared.reader,
+            episode.request.bag_uri,
+            features,
+            alignment.of({f.key for f in features}),  # a reused camera is not even read
+            alignment.ticks_ns,
+            plan.source_name,
+            episode.prepared.whole,
+        ):
+            sinks.add(frame)
+    finally:
+        clips = sinks.close()
+    qa = _assess(episode, fidelity, clips, monitor)
+    (workdir / QA_FILE).write_text(json.dumps(qa.to_dict()))
+    write_provenance(workdir / PROVENANCE_FILE, alignment.sources, alignment.ticks_ns)
+    staged = _staged_features(plan, alignment, sinks, clips, episode.reused)
+    stats = sinks.stats([f.key for f in staged if f.video_info is None])
+    stats.update({key: clip.stats for key, clip in episode.reused.items()})
+    (workdir / STATS_FILE).write_text(json.dumps(stats))
+    summary = _summary(episode, staged, qa)
+    _publish(workdir, summary.dir_uri, summary)
+    return summary
+
+
+def _assess(
+    episode: _Episode, fidelity: EpisodeFidelity, clips: dict[str, ClipInfo], monitor: ValueMonitor
+) -> EpisodeQA:
+    """The episode's QA: :func:`bag_checks`, the video checks of its clips, then every streamed check."""
+    prepared, config, fps = episode.prepared, episode.qa_config, episode.plan.fps
+    video_checks, video_plots = fidelity.check(clips, fps)  # before publishing: refs are scratch
+    extra_plots = _take_reused(episode.workdir, episode.reused, video_checks, video_plots, monitor)
+    skipped = {
+        t.topic: t.skipped_packets for t in prepared.timeline.topics.values() if t.skipped_packets is not None
+    }
+    extra = [
+        *bag_checks(prepared.reader, config, prepared.alignment, episode.frame_tasks),
+        *video_checks,
+        *skipped_packet_checks(skipped),
+    ]
+    return assess_episode(
+        episode.request.bag_uri, config, prepared.timeline, prepared.alignment, monitor, extra, fps,
+        extra_plots=extra_plots,
+    )  # fmt: skip
+
+
+def _summary(episode: _Episode, features: tuple[StagedFeature, ...], qa: EpisodeQA) -> EpisodeSummary:
+    request, info, alignment = episode.request, episode.prepared.whole.info, episode.prepared.alignment
+    ticks = alignment.ticks_ns
+    return EpisodeSummary(
+        episode_id=request.episode_id,
+        dir_uri=episode_dir(request.staging_uri, request.episode_id),
+        bag_uri=request.bag_uri,
+        storage=str(info.storage),
+        bag_size_bytes=info.size_bytes,
+        bag_fingerprint=bag_fingerprint(info),
+        manifest_entry=request.manifest_entry,
+        fps=episode.plan.fps,
+        frames=int(ticks.size),
+        first_tick_ns=int(ticks[0]),
+        last_tick_ns=int(ticks[-1]),
+        tasks=tuple(dict.fromkeys(episode.frame_tasks)),
+        task_source=episode.task_source,
+        features=features,
+        stamp_sources={f"{s.src.key}@{s.src.topic}": s.stamp_used for s in alignment.sources},
+        videos={f.key: f"videos/{f.key}.mp4" for f in features if f.video_info is not None},
+        metadata=dict(request.metadata),
+        window_ns=episode.prepared.window_ns,
+        segment=request.segment,
+        label=request.label,
+        note=request.note,
+        bagport_version=__version__,
+        contract_sha256=request.contract_sha256,
+        source_stamp=episode.stamp,
+        default_task=request.default_task,
+        alignment=list(alignment.report),
+        qa=qa_brief(qa),
+        qa_sha256=request.qa_sha256,
+        bag_read={**episode.prepared.reader.transfer.to_dict(), "warnings": list(info.warnings)},
+        clip_keys=episode.clip_keys,
+        reused_clips={key: clip.episode_id for key, clip in episode.reused.items()},
+    )
 
 
 def qa_brief(qa: EpisodeQA) -> dict[str, Any]:
@@ -244,14 +223,14 @@ def _reusable(request: EpisodeRequest, stamp: str) -> EpisodeSummary | None:
 
 def _staged_features(
     plan: ContractPlan,
-    sources: list[AlignedSource],
-    sinks: _EpisodeSinks,
-    clips: dict[str, Any],
+    alignment: Alignment,
+    sinks: EpisodeSinks,
+    clips: dict[str, ClipInfo],
     reused: dict[str, ReusedClip],
 ) -> tuple[StagedFeature, ...]:
     out = []
     for feature in plan.features:
-        mine = [s for s in sources if s.src.key == feature.key]
+        mine = alignment.of({feature.key})
         topics = tuple(s.src.topic for s in mine)
         if feature.key in reused:
             out.append(replace(reused[feature.key].feature, sources=topics))
@@ -267,7 +246,7 @@ def _staged_features(
                 )
             )
             continue
-        names = tuple(n for s in mine for n in (s.extractor.names if s.extractor else ()))
+        names = sinks.names.get(feature.key, ())
         width = sinks.widths[feature.key]
         out.append(
             StagedFeature(

@@ -24,6 +24,7 @@ import numpy.typing as npt
 import simplejpeg
 from PIL import Image as PILImage
 
+from bagport.decode import ImageKind
 from bagport.qa import CheckResult, judge
 from bagport.qa.config import VideoQA
 from bagport.video import ClipFidelity, ClipInfo, FidelityParams, FidelityRecorder, compare_clip
@@ -44,12 +45,17 @@ class EpisodeFidelity:
         self._recorders: dict[str, FidelityRecorder] = {}
         self._depth: dict[str, DepthFidelityRecorder] = {}
 
-    def record(self, key: str, rgb: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
+    def record(
+        self,
+        key: str,
+        rgb: npt.NDArray[np.uint8] | npt.NDArray[np.uint16],
+        kind: ImageKind = ImageKind.COLOUR,
+    ) -> None:
         """The frame just given to ``key``'s encoder (the same array, in the same order):
         RGB uint8 (H, W, 3), or a depth camera's codes (H, W)."""
         if not self._config.fidelity:
             return
-        if rgb.ndim == 2:
+        if kind is ImageKind.DEPTH:
             depth = self._depth.get(key)
             if depth is None:
                 self._scratch.mkdir(parents=True, exist_ok=True)
@@ -74,65 +80,70 @@ class EpisodeFidelity:
         """Compare every closed clip with its references; returns the checks and the report data."""
         checks: list[CheckResult] = []
         plots: dict[str, Any] = {}
-        config = self._config
         for key, depth in self._depth.items():
-            result = compare_depth_clip(clips[key].path, depth, fps=fps)
-            listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
-            checks += [
-                _frame_check(key, result, config),
-                judge(
-                    "video.damaged_frames",
-                    key,
-                    float(result.damaged_frames),
-                    config.damaged_frames,
-                    f"{result.damaged_frames} depth frame(s) decode with codes other than those encoded "
-                    f"(lossless HEVC)"
-                    + (f" (frames {listed})" if listed else "")
-                    + f"; all {result.sampled_frames} frames checked",
-                ),
-            ]
-            plots[key] = result.to_dict()
-        for key, recorder in self._recorders.items():
-            clip = clips[key]
-            result = compare_clip(clip.path, recorder, fps=fps, params=FidelityParams())
-            share = f"{result.sampled_frames} of {result.frames_expected} frames checked"
-            psnr = result.psnr_min_db if result.psnr_min_db is not None else 0.0
-            where = f" (frame {result.worst_frame_index})" if result.worst_frame_index is not None else ""
-            listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
-            found = [
-                _frame_check(key, result, config),
-                judge(
-                    "video.psnr_min_db",
-                    key,
-                    psnr,
-                    config.psnr_min_db,
-                    f"worst frame {psnr:.1f} dB{where}, median {result.psnr_median_db} dB; {share}",
-                    lower_is_worse=True,
-                ),
-                judge(
-                    "video.damaged_frames",
-                    key,
-                    float(result.damaged_frames),
-                    config.damaged_frames,
-                    f"{result.damaged_frames} frame(s) with stale or foreign blocks"
-                    + (f" (frames {listed})" if listed else "")
-                    + f"; {share}",
-                ),
-                judge(
-                    "video.copied_frames",
-                    key,
-                    float(result.copied_frames),
-                    config.copied_frames,
-                    f"{result.copied_frames} frame(s) decode as a copy of an earlier frame; {share}",
-                ),
-            ]
+            found, plots[key] = self._depth_checks(key, compare_depth_clip(clips[key].path, depth, fps=fps))
             checks += found
-            entry = result.to_dict()
-            if result.worst is not None and any(c.verdict != "pass" for c in found):
-                entry["worst_jpeg_base64"] = _jpeg_base64(result.worst.side_by_side())
-            plots[key] = entry
+        for key, recorder in self._recorders.items():
+            result = compare_clip(clips[key].path, recorder, fps=fps, params=FidelityParams())
+            found, plots[key] = self._colour_checks(key, result)
+            checks += found
         self.discard()
         return checks, plots
+
+    def _depth_checks(self, key: str, result: ClipFidelity) -> tuple[list[CheckResult], dict[str, Any]]:
+        listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
+        checks = [
+            _frame_check(key, result, self._config),
+            judge(
+                "video.damaged_frames",
+                key,
+                float(result.damaged_frames),
+                self._config.damaged_frames,
+                f"{result.damaged_frames} depth frame(s) decode with codes other than those encoded "
+                f"(lossless HEVC)"
+                + (f" (frames {listed})" if listed else "")
+                + f"; all {result.sampled_frames} frames checked",
+            ),
+        ]
+        return checks, result.to_dict()
+
+    def _colour_checks(self, key: str, result: ClipFidelity) -> tuple[list[CheckResult], dict[str, Any]]:
+        config = self._config
+        share = f"{result.sampled_frames} of {result.frames_expected} frames checked"
+        psnr = result.psnr_min_db if result.psnr_min_db is not None else 0.0
+        where = f" (frame {result.worst_frame_index})" if result.worst_frame_index is not None else ""
+        listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
+        found = [
+            _frame_check(key, result, config),
+            judge(
+                "video.psnr_min_db",
+                key,
+                psnr,
+                config.psnr_min_db,
+                f"worst frame {psnr:.1f} dB{where}, median {result.psnr_median_db} dB; {share}",
+                lower_is_worse=True,
+            ),
+            judge(
+                "video.damaged_frames",
+                key,
+                float(result.damaged_frames),
+                config.damaged_frames,
+                f"{result.damaged_frames} frame(s) with stale or foreign blocks"
+                + (f" (frames {listed})" if listed else "")
+                + f"; {share}",
+            ),
+            judge(
+                "video.copied_frames",
+                key,
+                float(result.copied_frames),
+                config.copied_frames,
+                f"{result.copied_frames} frame(s) decode as a copy of an earlier frame; {share}",
+            ),
+        ]
+        entry = result.to_dict()
+        if result.worst is not None and any(c.verdict != "pass" for c in found):
+            entry["worst_jpeg_base64"] = _jpeg_base64(result.worst.side_by_side())
+        return found, entry
 
     def discard(self) -> None:
         """Delete the reference files (also after a failed episode)."""

@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from bagport.bags import BagInfo, BagReader
 from bagport.contract import FeatureKind
-from bagport.episode.assemble import AlignedSource
+from bagport.episode.alignment import AlignedSource, Alignment
 from bagport.episode.timeline import Timeline
 from bagport.qa import (
     AlignedStamps,
@@ -29,7 +29,7 @@ from bagport.qa import (
     sync_checks,
 )
 
-__all__ = ["assess_episode", "integrity_check", "safety_check", "task_check"]
+__all__ = ["assess_episode", "bag_checks", "integrity_check", "safety_check", "task_check"]
 
 Int64Array = npt.NDArray[np.int64]
 
@@ -111,24 +111,37 @@ def integrity_check(info: BagInfo, config: QAConfig) -> list[CheckResult]:
     return [judge("integrity.unchecked", "bag", unchecked, config.integrity.unchecked, reason)]
 
 
+def bag_checks(
+    reader: BagReader, config: QAConfig, alignment: Alignment, frame_tasks: Sequence[str]
+) -> list[CheckResult]:
+    """The checks of an episode beside the streamed ones, for conversion and ``bagport qa`` alike:
+    the safety topic, the bag's checksums, the task prompt."""
+    ticks_ns = alignment.ticks_ns
+    return [
+        *safety_check(reader, config, int(ticks_ns[0]), int(ticks_ns[-1])),
+        *integrity_check(reader.info, config),
+        task_check(config, frame_tasks),
+    ]
+
+
 def assess_episode(
     bag_uri: str,
     config: QAConfig,
     timeline: Timeline,
-    sources: Sequence[AlignedSource],
-    ticks_ns: Int64Array,
+    alignment: Alignment,
     monitor: ValueMonitor,
     extra: Sequence[CheckResult],
     fps: int,
     extra_plots: dict[str, Any] | None = None,
-    alignment: Sequence[dict[str, Any]] = (),
 ) -> EpisodeQA:
-    """Every check of one episode; ``alignment`` is :func:`~bagport.episode.alignment.align_sources`'s report."""
+    """Every check of one episode: its streams, the alignment, the values monitored while streaming
+    and the ``extra`` checks (:func:`bag_checks`, and a conversion's video checks)."""
+    sources, ticks_ns = alignment.sources, alignment.ticks_ns
     start_ns, end_ns = int(ticks_ns[0]), int(ticks_ns[-1])
     checks, plots = stream_checks(_streams(timeline, sources), start_ns, end_ns, config)
     synced, sync_plots = sync_checks(_aligned(sources), ticks_ns, config.time)
     checks += synced
-    checks += alignment_checks(alignment, config.time)
+    checks += alignment_checks(alignment.report, config.time)
     checks += monitor.checks()
     checks += extra
     duration_s = int(ticks_ns.size) / fps
@@ -143,6 +156,6 @@ def assess_episode(
             **monitor.plots(),
             "window_ns": [start_ns, end_ns],
             **(extra_plots or {}),
-            "alignment": list(alignment),
+            "alignment": list(alignment.report),
         },
     )

@@ -27,7 +27,7 @@ from fsspec.core import url_to_fs
 from bagport import __version__
 from bagport.contract import FeatureKind
 from bagport.decode.video import decoder_settings
-from bagport.episode.assemble import AlignedSource
+from bagport.episode.alignment import Alignment
 from bagport.qa import CheckResult
 from bagport.request import EpisodeRequest, msg_definitions_sha256
 from bagport.staging import (
@@ -73,14 +73,13 @@ def clip_keys(
     request: EpisodeRequest,
     stamp: str,
     fps: int,
-    sources: list[AlignedSource],
-    ticks_ns: np.ndarray[Any, Any],
+    alignment: Alignment,
 ) -> dict[str, str]:
     """The clip key of every camera source (see the module docstring); empty without a file stamp."""
     if not stamp:
         return {}
     keys: dict[str, str] = {}
-    for source in sources:
+    for source in alignment.sources:
         if source.kind is not FeatureKind.VIDEO:
             continue
         digest = hashlib.sha256()
@@ -95,7 +94,7 @@ def clip_keys(
         for field in fields(source.selection):
             _digest_value(digest, getattr(source.selection, field.name))
         _digest_value(digest, source.filled)
-        _digest_value(digest, ticks_ns)
+        _digest_value(digest, alignment.ticks_ns)
         if source.timeline.skipped_packets is not None:  # a video stream: how it was decoded
             timeline = source.timeline
             _digest_value(digest, (timeline.skipped_packets, timeline.preroll_ns, decoder_settings()))

@@ -16,10 +16,9 @@ from concurrent.futures import Executor, ProcessPoolExecutor
 
 from bagport.bags import open_bag
 from bagport.contract import FeatureKind, parse_contract
-from bagport.episode.alignment import align_sources
-from bagport.episode.assemble import Frame, assemble_frames
-from bagport.episode.checks import scan_episode
-from bagport.episode.quality import assess_episode, integrity_check, safety_check, task_check
+from bagport.episode.assemble import iter_frames
+from bagport.episode.prepare import prepare_episode
+from bagport.episode.quality import assess_episode, bag_checks
 from bagport.episode.tasks import resolve_tasks
 from bagport.errors import BagportError, ManifestError
 from bagport.manifest import load_manifest
@@ -33,37 +32,32 @@ __all__ = ["score_bag", "score_manifest"]
 
 def score_bag(request: EpisodeRequest) -> EpisodeQA:
     """QA of one episode (a bag, or its window); one that cannot be read or aligned gets a failing
-    record with the reason."""
+    record with the reason. The steps of a conversion, with the value monitor as the only sink."""
     plan = parse_contract(request.contract_text, request.contract_name)
     config = QAConfig.model_validate(request.qa)
     uri = request.bag_uri
     try:
         with open_bag(uri, msg_definitions=request.msg_definitions) as whole:
-            reader, timeline, _ = scan_episode(whole, plan, request)
-            sources, ticks, alignment = align_sources(plan, timeline, uri)
+            episode = prepare_episode(whole, plan, request)
+            alignment = episode.alignment
             try:
                 frame_tasks, _ = resolve_tasks(
-                    timeline.tasks, ticks, reader.info.custom_data, request, plan.contract.default_task
-                )
+                    episode.timeline.tasks, alignment.ticks_ns, whole.info.custom_data, request,
+                    plan.contract.default_task,
+                )  # fmt: skip
             except ManifestError:
                 frame_tasks = []
-            monitor = ValueMonitor(config.values, plan.fps, int(ticks.size))
-
-            def on_frame(frame: Frame) -> None:
-                monitor.add_vectors(frame.index, frame.vectors)
-
+            monitor = ValueMonitor(config.values, plan.fps, alignment.frames)
             vectors = [f for f in plan.features if f.kind is FeatureKind.VECTOR]
-            vector_sources = [s for s in sources if s.kind is FeatureKind.VECTOR]
+            vector_sources = alignment.of({f.key for f in vectors})
             if vector_sources:
-                assemble_frames(reader, uri, vectors, vector_sources, ticks, on_frame, plan.source_name)
-            extra = [
-                *safety_check(reader, config, int(ticks[0]), int(ticks[-1])),
-                *integrity_check(whole.info, config),
-                task_check(config, frame_tasks),
-            ]
-            return assess_episode(
-                uri, config, timeline, sources, ticks, monitor, extra, plan.fps, alignment=alignment
-            )
+                frames = iter_frames(
+                    episode.reader, uri, vectors, vector_sources, alignment.ticks_ns, plan.source_name
+                )
+                for frame in frames:
+                    monitor.add_vectors(frame.index, frame.vectors)
+            extra = bag_checks(episode.reader, config, alignment, frame_tasks)
+            return assess_episode(uri, config, episode.timeline, alignment, monitor, extra, plan.fps)
     except BagportError as err:
         return EpisodeQA.failed(uri, str(err))
 

@@ -1,24 +1,47 @@
-"""Writers for the per-episode frame table (streamed as frames arrive) and provenance table.
+"""The sinks of pass 2: everything that consumes :func:`~bagport.episode.assemble.iter_frames`.
 
-Rows are buffered in small batches and written as they fill, so memory does not
-grow with episode length.
+:class:`EpisodeSinks` takes every frame of an episode: each camera's image goes to its
+:class:`CameraSink` (encoder, pixel stats, fidelity recorder, QA image checks), the vectors to the
+QA value monitor and the :class:`FrameTableWriter` (``frames.parquet``). :func:`write_provenance`
+writes the per-frame provenance table from the alignment alone.
+
+Rows are buffered in small batches and written as they fill, so memory does not grow with episode
+length.
+
+A colour camera becomes a colour video (the run's codec). A depth camera (``16UC1``, ``32FC1``,
+``compressedDepth``; its :class:`~bagport.decode.ImageKind` comes with the frame) becomes a LeRobot
+depth video: 12-bit codes (:class:`~bagport.video.depth.DepthQuantizer`, over
+``image.depth_range_m``) in a lossless HEVC ``gray12le`` clip, marked ``is_depth_map`` with the
+quantiser's parameters, so LeRobot's loader returns depth again. Its stats are of that returned
+depth, in metres.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-if TYPE_CHECKING:
-    from bagport.episode.assemble import AlignedSource
+from bagport.columns import vector_column
+from bagport.contract import ContractPlan, FeatureKind
+from bagport.contract.plan import SourceSpec
+from bagport.decode import ImageKind
+from bagport.episode.alignment import AlignedSource
+from bagport.episode.assemble import Frame
+from bagport.episode.fidelity import EpisodeFidelity
+from bagport.errors import DecodeError
+from bagport.qa import ValueMonitor
+from bagport.staging import FRAMES_FILE
+from bagport.stats import ImageStatsAccumulator, episode_sketch_fields, stats_to_json, vector_stats
+from bagport.video import ClipInfo, EncoderSettings, StreamingEncoder
+from bagport.video.depth import DEPTH_ENCODER, DEPTH_QMAX, DepthQuantizer
 
-__all__ = ["FrameTableWriter", "vector_type", "write_provenance"]
+__all__ = ["CameraSink", "EpisodeSinks", "FrameTableWriter", "vector_type", "write_provenance"]
 
 _BATCH_ROWS = 1024
 Int64Array = npt.NDArray[np.int64]
@@ -164,3 +187,152 @@ def _constant(value: str, size: int, present: npt.NDArray[np.bool_] | None = Non
     mask = None if present is None else ~present
     array: pa.Array[Any] = pa.DictionaryArray.from_arrays(indices, pa.array([value], pa.string()), mask=mask)
     return array
+
+
+_PREVIEW_SHIFT = 4
+"""Depth codes >> 4 give the 8-bit picture the QA image checks look at (0 = invalid or nearest)."""
+
+
+class CameraSink:
+    """Feeds one camera's frames, in order, to its encoder, stats, fidelity recorder and QA."""
+
+    def __init__(
+        self,
+        path: Path,
+        source: SourceSpec,
+        first: npt.NDArray[Any],
+        kind: ImageKind,
+        fps: int,
+        settings: EncoderSettings,
+        fidelity: EpisodeFidelity,
+        monitor: ValueMonitor,
+    ) -> None:
+        self.key = source.key
+        self.kind = kind
+        self.quantizer: DepthQuantizer | None = None
+        if kind is ImageKind.DEPTH:
+            self.quantizer = DepthQuantizer()
+            if source.depth_range_m is not None:
+                low, high = source.depth_range_m
+                self.quantizer = DepthQuantizer(depth_min_m=low, depth_max_m=high)
+            settings = DEPTH_ENCODER
+        elif source.depth_range_m is not None:
+            raise DecodeError(
+                f"{self.key}: image.depth_range_m is set but {source.topic} carries colour images",
+                fix="remove depth_range_m from this entry (it applies to 16UC1/32FC1/compressedDepth topics).",
+            )
+        self.encoder = StreamingEncoder(
+            path, fps=fps, width=first.shape[1], height=first.shape[0], settings=settings
+        )
+        self.settings = settings
+        self.stats = (
+            ImageStatsAccumulator(bins=DEPTH_QMAX + 1, levels=self.quantizer.levels())
+            if self.quantizer is not None
+            else ImageStatsAccumulator()
+        )
+        self._fidelity = fidelity
+        self._monitor = monitor
+
+    def write(self, frame_index: int, image: npt.NDArray[Any]) -> None:
+        if self.quantizer is None:
+            pixels, preview = image, image
+        else:
+            pixels = self.quantizer.codes(image)
+            preview = (pixels >> _PREVIEW_SHIFT).astype(np.uint8)
+        self.encoder.write(pixels)
+        self._fidelity.record(self.key, pixels, self.kind)
+        self.stats.update(pixels)
+        self._monitor.add_image(frame_index, self.key, preview)
+
+    def close(self) -> ClipInfo:
+        return self.encoder.close()
+
+    def video_info(self, clip: ClipInfo, fps: int) -> dict[str, Any]:
+        """The feature's ``info`` in ``info.json``, as LeRobot 0.6 writes it."""
+        info: dict[str, Any] = {
+            "video.height": clip.height,
+            "video.width": clip.width,
+            "video.codec": clip.codec,
+            "video.pix_fmt": clip.pix_fmt,
+            "video.fps": fps,
+            "video.channels": self.channels,
+            "has_audio": False,
+            **self.settings.to_info(),
+            "is_depth_map": False,
+        }
+        if self.quantizer is not None:
+            info.update(self.quantizer.to_info())
+        return info
+
+    @property
+    def channels(self) -> int:
+        return self.kind.channels
+
+
+class EpisodeSinks:
+    """Every consumer of an episode's frames: its cameras, its frame table and the QA value monitor."""
+
+    def __init__(
+        self,
+        workdir: Path,
+        plan: ContractPlan,
+        settings: EncoderSettings,
+        frame_tasks: Sequence[str],
+        monitor: ValueMonitor,
+        fidelity: EpisodeFidelity,
+    ) -> None:
+        self.workdir, self.plan, self.settings = workdir, plan, settings
+        self.frame_tasks, self.monitor, self.fidelity = frame_tasks, monitor, fidelity
+        vector_dtypes = {f.key: f.dtype for f in plan.features if f.kind is FeatureKind.VECTOR}
+        (workdir / "videos").mkdir(parents=True, exist_ok=True)
+        self.frames = FrameTableWriter(workdir / FRAMES_FILE, plan.fps, vector_dtypes)
+        self.cameras: dict[str, CameraSink] = {}
+        self.widths: dict[str, int] = {}
+        self.names: Mapping[str, tuple[str, ...]] = {}
+        """Each vector's dimension names (as the last frame knew them)."""
+        self._camera_sources = {f.key: f.sources[0] for f in plan.features if f.kind is FeatureKind.VIDEO}
+
+    def add(self, frame: Frame) -> None:
+        for key, image in frame.images.items():
+            camera = self.cameras.get(key)
+            if camera is None:
+                camera = CameraSink(
+                    self.workdir / "videos" / f"{key}.mp4",
+                    self._camera_sources[key],
+                    image,
+                    frame.kinds[key],
+                    self.plan.fps,
+                    self.settings,
+                    self.fidelity,
+                    self.monitor,
+                )
+                self.cameras[key] = camera
+            camera.write(frame.index, image)
+        for key, vec in frame.vectors.items():
+            width = self.widths.setdefault(key, vec.shape[0])
+            if vec.shape[0] != width:
+                raise DecodeError(
+                    f"{key!r} has {vec.shape[0]} values at frame {frame.index}, {width} before",
+                    t_ns=frame.tick_ns,
+                    fix="select a fixed set of dimensions with selector.names.",
+                )
+        self.names = frame.names
+        self.monitor.add_vectors(frame.index, frame.vectors)
+        self.frames.add(frame.index, self.frame_tasks[frame.index], frame.vectors)
+
+    def close(self) -> dict[str, ClipInfo]:
+        """Close every writer; returns video clip infos by key."""
+        self.frames.close()
+        return {key: camera.close() for key, camera in self.cameras.items()}
+
+    def stats(self, vector_keys: Sequence[str]) -> dict[str, Any]:
+        """Per-episode stats partials of the vectors (read back from the closed frame table) and cameras."""
+        stats: dict[str, Any] = {}
+        table = pq.read_table(self.workdir / FRAMES_FILE, columns=list(vector_keys))
+        for name in table.column_names:
+            values = vector_column(table, name)
+            stats[name] = {**stats_to_json(vector_stats(values)), **episode_sketch_fields(values)}
+        for key, camera in self.cameras.items():
+            acc = camera.stats
+            stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
+        return stats

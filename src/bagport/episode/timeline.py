@@ -138,6 +138,60 @@ def _admitted(message: BagMessage, gate: KeyframeGate, uri: str) -> bool:
         raise err.located(uri=uri, topic=message.topic, t_ns=message.log_time_ns) from err
 
 
+def _check_samples_found(
+    uri: str,
+    gates: Mapping[str, KeyframeGate],
+    filters: Mapping[str, StreamFilter],
+    log: Mapping[str, list[int]],
+    frames_seen: Mapping[str, None],
+    window_ns: tuple[int, int] | None,
+) -> None:
+    """Every video stream has a key frame, every filtered stream a message carrying its transform."""
+    for topic, gate in gates.items():
+        if gate.skipped and not log[topic]:
+            raise AlignmentError(
+                f"none of the {gate.skipped} video packets on {topic}"
+                + ("" if window_ns is None else " in the episode window or before it")
+                + " is a key frame, so no frame can be decoded",
+                uri=uri,
+                topic=topic,
+                fix="record the camera with periodic key frames (the encoder's GOP / keyint setting), "
+                "or leave the topic out of the contract.",
+            )
+    for stream, spec in filters.items():
+        if stream in log and not log[stream]:
+            raise AlignmentError(
+                f"no message on {spec.topic} carries a transform to child frame {spec.child_frame!r}"
+                + (f" from {spec.parent_frame!r}" if spec.parent_frame else "")
+                + f" (transforms seen: {', '.join(frames_seen) or 'none'})",
+                uri=uri,
+                topic=spec.topic,
+                fix="set selector.child_frame (and parent_frame) to a frame the bag publishes.",
+            )
+
+
+def _topic_timeline(
+    topic: str,
+    log_ns: list[int],
+    stamps: list[int | None],
+    publish_ns: Int64Array | None,
+    gate: KeyframeGate | None,
+    preroll_ns: tuple[int, int] | None,
+) -> TopicTimeline:
+    """One stream's timeline; its header stamps only when all are set and they advance."""
+    usable = bool(stamps) and all(s is not None and s > 0 for s in stamps)
+    if usable and len(stamps) > 1 and len(set(stamps)) == 1:
+        usable = False
+    return TopicTimeline(
+        topic=topic,
+        log_ns=np.asarray(log_ns, dtype=np.int64),
+        header_ns=np.asarray(stamps, dtype=np.int64) if usable else None,
+        publish_ns=publish_ns,
+        skipped_packets=gate.skipped if gate is not None else None,
+        preroll_ns=preroll_ns,
+    )
+
+
 def scan_timeline(
     reader: BagReader,
     topics: Iterable[str],
@@ -183,43 +237,15 @@ def scan_timeline(
                 continue
             log[stream].append(message.log_time_ns)
             header[stream].append(stamp_ns)
-    for topic, gate in gates.items():
-        if gate.skipped and not log[topic]:
-            raise AlignmentError(
-                f"none of the {gate.skipped} video packets on {topic}"
-                + ("" if window_ns is None else " in the episode window or before it")
-                + " is a key frame, so no frame can be decoded",
-                uri=reader.info.uri,
-                topic=topic,
-                fix="record the camera with periodic key frames (the encoder's GOP / keyint setting), "
-                "or leave the topic out of the contract.",
-            )
-    for stream, spec in filters.items():
-        if stream in log and not log[stream]:
-            raise AlignmentError(
-                f"no message on {spec.topic} carries a transform to child frame {spec.child_frame!r}"
-                + (f" from {spec.parent_frame!r}" if spec.parent_frame else "")
-                + f" (transforms seen: {', '.join(frames_seen) or 'none'})",
-                uri=reader.info.uri,
-                topic=spec.topic,
-                fix="set selector.child_frame (and parent_frame) to a frame the bag publishes.",
-            )
+    _check_samples_found(reader.info.uri, gates, filters, log, frames_seen, window_ns)
     skipped = {topic: gate.skipped for topic, gate in gates.items()}
     publish = _publish_times(reader, log, tuple(dict.fromkeys(publish_topics)), start_ns, stop_ns, skipped)
-    result: dict[str, TopicTimeline] = {}
-    for topic in feature_topics:
-        stamps = header[topic]
-        usable = bool(stamps) and all(s is not None and s > 0 for s in stamps)
-        if usable and len(stamps) > 1 and len(set(stamps)) == 1:
-            usable = False
-        result[topic] = TopicTimeline(
-            topic=topic,
-            log_ns=np.asarray(log[topic], dtype=np.int64),
-            header_ns=np.asarray(stamps, dtype=np.int64) if usable else None,
-            publish_ns=publish.get(topic),
-            skipped_packets=gates[topic].skipped if topic in gates else None,
-            preroll_ns=prerolls.get(topic),
+    result = {
+        topic: _topic_timeline(
+            topic, log[topic], header[topic], publish.get(topic), gates.get(topic), prerolls.get(topic)
         )
+        for topic in feature_topics
+    }
     return Timeline(topics=result, tasks=tuple(tasks))
 
 

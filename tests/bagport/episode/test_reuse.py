@@ -10,7 +10,7 @@ from typing import Any
 import pytest
 
 import bagport.episode.assemble
-import bagport.episode.cameras
+import bagport.episode.sinks
 from bagport.dataset import write_dataset
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import EpisodeRequest, convert_episode
@@ -56,7 +56,7 @@ def test_a_changed_state_selector_reuses_both_camera_clips(
         raise AssertionError("a camera was encoded again")
 
     monkeypatch.setattr(bagport.episode.assemble, "_decode", spy)
-    monkeypatch.setattr(bagport.episode.cameras, "StreamingEncoder", no_encoder)
+    monkeypatch.setattr(bagport.episode.sinks, "StreamingEncoder", no_encoder)
     second = convert_episode(_request(bag, staging, FEWER_JOINTS))
     assert second.episode_id != first.episode_id
     assert second.reused_clips == {

@@ -1,19 +1,28 @@
-"""``bagport convert --config run.yaml``: one file of run options (ConvertConfig's fields), the command line
-overriding it; and every ConvertConfig field can be set from the command line."""
+"""``bagport convert``'s options are generated from ConvertConfig's fields; ``--config run.yaml``: one file
+of run options keyed as those fields, the command line overriding it."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import pytest
 import yaml
+from pydantic import Field
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import BagportError
 from bagport.synth import EpisodeSpec, write_episode_bag
 from flows.cli import build_parser, main
-from flows.cli_config import CONFIG_FIELDS, convert_config, load_encoder
+from flows.cli_config import (
+    PRESETS,
+    add_config_options,
+    config_options,
+    convert_config,
+    load_encoder,
+    resolve_options,
+)
 from tests.helpers import SAMPLE_CONTRACT
 
 
@@ -22,9 +31,56 @@ def _config(argv: list[str]) -> ConvertConfig:
     return convert_config(parser.parse_args(["convert", *argv]), vars(parser.parse_args(["convert"])))
 
 
-def test_every_config_field_has_a_command_line_option() -> None:
-    reachable = {field for field in CONFIG_FIELDS.values() if field != "codec"} | {"encoder"}
-    assert reachable == set(ConvertConfig.model_fields)
+def _convert_actions() -> dict[str, argparse.Action]:
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return {a.dest: a for a in sub.choices["convert"]._actions}
+
+
+def test_every_config_field_is_an_option_with_its_description_as_help() -> None:
+    actions = _convert_actions()
+    for name, field, option in config_options():
+        action = actions[option.named or name]
+        assert action.option_strings == [option.flag]
+        assert action.help == field.description and field.description
+    assert {o.named for _, _, o in config_options() if o.named} == set(PRESETS)  # each preset has a loader
+
+
+def test_types_choices_and_defaults_come_from_the_fields() -> None:
+    actions = _convert_actions()
+    assert actions["runner"].choices == ["process", "thread", "dask", "ray"]
+    assert actions["runner"].default == "process"
+    assert actions["on_qa_fail"].choices == ["exclude", "keep", "fail_run"]
+    assert (actions["workers"].type, actions["chunks_size"].default) == (int, 1000)
+    assert actions["data_files_size_in_mb"].type is float
+    assert actions["overwrite"].nargs == 0 and actions["overwrite"].default is False
+    assert actions["hdf5_jpeg_quality"].metavar == "QUALITY"
+    assert _config(
+        ["--glob", "b/*", "--contract", "c", "--output", "o", "--format", "lerobot, hdf5"]
+    ).formats == (
+        "lerobot",
+        "hdf5",
+    )
+    with pytest.raises(SystemExit):  # a bag source: a manifest or a glob, not both
+        build_parser().parse_args(["convert", "--manifest", "m.yaml", "--glob", "b/*"])
+
+
+def test_a_new_field_becomes_an_option_without_writing_it_again() -> None:
+    class Grown(ConvertConfig):
+        max_gap_s: float = Field(default=0.5, description="largest gap filled (default: 0.5)")
+        dry_run: bool = Field(default=False, description="plan only")
+
+    parser = argparse.ArgumentParser()
+    add_config_options(parser, Grown)
+    args = parser.parse_args(["--max-gap-s", "2", "--dry-run", "--glob", "b/*"])
+    assert (args.max_gap_s, args.dry_run, args.bags_glob) == (2.0, True, "b/*")
+    assert "largest gap filled (default: 0.5)" in parser.format_help()
+
+
+def test_run_yaml_keys_resolve_as_the_command_line_does() -> None:
+    resolved = resolve_options({"codec": "archival", "formats": "hdf5,robodm", "workers": 2})
+    assert resolved == {"encoder": load_encoder("archival"), "formats": ("hdf5", "robodm"), "workers": 2}
+    assert resolve_options({"formats": ["hdf5"]}) == {"formats": ["hdf5"]}  # a list stays a list
 
 
 def test_the_command_line_overrides_the_file(tmp_path: Path) -> None:

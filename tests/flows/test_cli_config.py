@@ -23,7 +23,7 @@ from flows.cli_config import (
     load_encoder,
     resolve_options,
 )
-from tests.helpers import SAMPLE_CONTRACT
+from tests.helpers import REPO, SAMPLE_CONTRACT
 
 
 def _config(argv: list[str]) -> ConvertConfig:
@@ -137,3 +137,13 @@ def test_convert_runs_from_a_config_file(tmp_path: Path) -> None:
     )
     assert main(["convert", "--config", str(run), "--quiet"]) == 0
     assert validate_dataset(out, repo_id="test/config").episodes == 2
+
+
+def test_the_example_run_yaml_is_a_valid_config() -> None:
+    config = _config(["--config", str(REPO / "configs/run.yaml")])
+    assert (config.runner, config.ray_address, config.formats) == (
+        "ray",
+        "ray://head:10001",
+        ("lerobot", "hdf5"),
+    )
+    assert config.encoder == load_encoder("h264-fast")

@@ -6,6 +6,10 @@ from __future__ import annotations
 
 import json
 import os
+import shutil
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +23,7 @@ from prefect.utilities.templating import apply_values
 
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
+from bagport.dataset.validate import validate_dataset
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import build_parser
 from flows.cli_config import convert_config, load_encoder
@@ -205,3 +210,41 @@ def test_scheduled_ingestion_appends_only_new_bags(tmp_path: Path) -> None:
     assert runs == ["run-001.json", "run.json"]
     record = json.loads((out / "meta/provenance/run-001.json").read_text())
     assert [Path(u).name for u in record["manifest"]["converted_now"]] == ["day2_a"]
+
+
+@pytest.mark.slow
+def test_a_deployment_runs_on_ray(tmp_path: Path) -> None:
+    """The reconvert flow given a config as a deployment's JSON parameter (runner ray, no address: a local
+    instance of `workers` CPUs), in a process of its own as a worker runs it."""
+    bags = tmp_path / "bags"
+    for seed in (1, 2):
+        write_episode_bag(bags / f"ep{seed}", "mcap", EpisodeSpec(duration_s=0.5, seed=seed))
+    out = tmp_path / "dataset"
+    config = {
+        "bags_glob": str(bags / "ep*"),
+        "contract": str(SAMPLE_CONTRACT),
+        "output": str(out),
+        "runner": "ray",
+        "ray_address": "",  # what `prefect deploy` leaves of an unset BAGPORT_RAY_ADDRESS
+        "workers": 2,
+        "codec": "h264-fast",
+    }
+    script = (
+        "import json, sys\n"
+        "from flows.deployments import reconvert\n"
+        "from flows.runners import prefect_api\n"
+        "with prefect_api():\n"
+        "    reconvert(config=json.loads(sys.argv[1]))\n"
+    )
+    ray_tmp = tempfile.mkdtemp(prefix="bagport-ray-")  # short: Unix socket paths are limited
+    env = {**os.environ, "RAY_TMPDIR": ray_tmp, "BAGPORT_DEBUG": "0"}
+    try:
+        done = subprocess.run(
+            [sys.executable, "-c", script, json.dumps(config)],
+            cwd=REPO, env=env, capture_output=True, text=True, timeout=300, check=False,
+        )  # fmt: skip
+    finally:
+        shutil.rmtree(ray_tmp, ignore_errors=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "Started a local Ray instance" in done.stdout + done.stderr
+    assert validate_dataset(out, repo_id="test/ray-deployment").episodes == 2

@@ -104,7 +104,7 @@ def add_config_options(parser: argparse.ArgumentParser, model: type[ConvertConfi
         target.add_argument(
             str(option.flag),
             dest=_key(name, option),
-            help=field.description,
+            help=(field.description or "").replace("%", "%%"),  # argparse formats help with %
             **_argument(name, field, option),
         )
 

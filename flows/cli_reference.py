@@ -34,6 +34,7 @@ def _subcommands(parser: argparse.ArgumentParser) -> Iterator[tuple[str, str, ar
 
 
 def _cell(text: str) -> str:
+    text = text.replace("%%", "%")  # argparse's escape
     return " ".join(text.split()).replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
 
 

@@ -23,6 +23,7 @@ from flows.cli_config import (
     load_encoder,
     resolve_options,
 )
+from flows.cli_reference import render_cli_reference
 from tests.helpers import REPO, SAMPLE_CONTRACT
 
 
@@ -42,7 +43,7 @@ def test_every_config_field_is_an_option_with_its_description_as_help() -> None:
     for name, field, option in config_options():
         action = actions[option.named or name]
         assert action.option_strings == [option.flag]
-        assert action.help == field.description and field.description
+        assert field.description and action.help == field.description.replace("%", "%%")
     assert {o.named for _, _, o in config_options() if o.named} == set(PRESETS)  # each preset has a loader
 
 
@@ -68,13 +69,17 @@ def test_types_choices_and_defaults_come_from_the_fields() -> None:
 def test_a_new_field_becomes_an_option_without_writing_it_again() -> None:
     class Grown(ConvertConfig):
         max_gap_s: float = Field(default=0.5, description="largest gap filled (default: 0.5)")
-        dry_run: bool = Field(default=False, description="plan only")
+        dry_run: bool = Field(default=False, description="plan only (100% safe)")
 
-    parser = argparse.ArgumentParser()
-    add_config_options(parser, Grown)
-    args = parser.parse_args(["--max-gap-s", "2", "--dry-run", "--glob", "b/*"])
+    parser = argparse.ArgumentParser(prog="bagport")
+    convert = parser.add_subparsers().add_parser("convert")
+    add_config_options(convert, Grown)
+    args = parser.parse_args(["convert", "--max-gap-s", "2", "--dry-run", "--glob", "b/*"])
     assert (args.max_gap_s, args.dry_run, args.bags_glob) == (2.0, True, "b/*")
-    assert "largest gap filled (default: 0.5)" in parser.format_help()
+    assert "plan only (100% safe)" in convert.format_help()
+    reference = render_cli_reference(parser)
+    assert "| `--max-gap-s` `MAX_GAP_S` | `0.5` | largest gap filled (default: 0.5) |" in reference
+    assert "| `--dry-run` |  | plan only (100% safe) |" in reference
 
 
 def test_run_yaml_keys_resolve_as_the_command_line_does() -> None:

@@ -73,6 +73,21 @@ def _comma_list(text: str) -> tuple[str, ...]:
     return tuple(part.strip() for part in text.split(",") if part.strip())
 
 
+GIVEN = "config_options_given"
+"""The namespace attribute listing the run options given on the command line (:class:`_Given`)."""
+
+
+class _Given(argparse.Action):
+    """Stores the option's value (a flag's ``const``) and records that it was given, so that a value equal
+    to the default still overrides ``--config``'s."""
+
+    def __call__(
+        self, _parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, _flag: Any = None
+    ) -> None:
+        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
+        setattr(namespace, GIVEN, {*getattr(namespace, GIVEN, ()), self.dest})
+
+
 def _argument(name: str, field: FieldInfo, option: CliOption) -> dict[str, Any]:
     """``add_argument``'s keywords for the field: type, choices, default and metavar from its annotation."""
     default = None if field.is_required() else field.get_default(call_default_factory=False)
@@ -81,7 +96,7 @@ def _argument(name: str, field: FieldInfo, option: CliOption) -> dict[str, Any]:
     kind = _value_type(field.annotation)
     if kind is bool:
         if default is False:
-            return {"action": "store_true"}
+            return {"action": _Given, "nargs": 0, "const": True, "default": False}
         return {"action": argparse.BooleanOptionalAction, "default": default}
     if get_origin(kind) is Literal:
         return {"choices": list(get_args(kind)), "default": default}
@@ -105,7 +120,7 @@ def add_config_options(parser: argparse.ArgumentParser, model: type[ConvertConfi
             str(option.flag),
             dest=_key(name, option),
             help=(field.description or "").replace("%", "%%"),  # argparse formats help with %
-            **_argument(name, field, option),
+            **{"action": _Given, **_argument(name, field, option)},
         )
 
 
@@ -133,11 +148,12 @@ def _config_file(path: str) -> dict[str, Any]:
 
 def convert_config(args: argparse.Namespace, defaults: dict[str, Any]) -> ConvertConfig:
     """The run's :class:`ConvertConfig`: the ``--config`` file's options, overridden by those given on the
-    command line (an option left at its parser default, ``defaults``, does not override the file)."""
+    command line (given: recorded by the parser, or other than the parser's ``defaults``)."""
     options = _config_file(args.config) if args.config else {}
+    given: set[str] = getattr(args, GIVEN, set())
     for name, _, option in config_options():
         key = _key(name, option)
-        if getattr(args, key) == defaults[key]:
+        if key not in given and getattr(args, key) == defaults[key]:
             continue
         options[key] = getattr(args, key)
         for other, _, other_option in config_options():  # the command line's bag source replaces the file's

@@ -113,6 +113,18 @@ def test_the_command_line_overrides_the_file(tmp_path: Path) -> None:
     assert _config(["--contract", "c.yaml", "--output", "o", "--glob", "b/*"]).encoder == load_encoder(None)
 
 
+def test_an_option_given_at_its_default_still_overrides_the_file(tmp_path: Path) -> None:
+    run = tmp_path / "run.yaml"
+    run.write_text(
+        "bags_glob: /fleet/*\ncontract: c.yaml\noutput: o\nrunner: dask\nchunks_size: 7\nformats: hdf5\n"
+    )
+    config = _config(
+        ["--config", str(run), "--runner", "process", "--chunks-size", "1000", "--format", "lerobot"]
+    )
+    assert (config.runner, config.chunks_size, config.formats) == ("process", 1000, ("lerobot",))
+    assert _config(["--config", str(run)]).runner == "dask"
+
+
 def test_a_config_that_is_not_a_mapping_is_one_paragraph(tmp_path: Path) -> None:
     run = tmp_path / "run.yaml"
     run.write_text("- just\n- a list\n")

@@ -1,20 +1,29 @@
-"""``bagport convert``'s run options as one :class:`~bagport.config.ConvertConfig`: from ``--config``, the
-command line and the codec presets."""
+"""``bagport convert``'s run options, generated from :class:`~bagport.config.ConvertConfig`'s fields: the
+command-line options (:func:`add_config_options`), ``--config run.yaml`` and the deployments' ``config``
+parameter (:func:`resolve_options`) take the same keys, so a new field is written once, in the library."""
 
 from __future__ import annotations
 
 import argparse
+import types
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
 import yaml
+from pydantic.fields import FieldInfo
 
+from bagport.config import CliOption, ConvertConfig, cli_option
 from bagport.errors import BagportError
 
-if TYPE_CHECKING:
-    from bagport.config import ConvertConfig
-
-__all__ = ["CONFIG_FIELDS", "convert_config", "load_encoder"]
+__all__ = [
+    "PRESETS",
+    "add_config_options",
+    "config_options",
+    "convert_config",
+    "load_encoder",
+    "resolve_options",
+]
 
 
 def load_encoder(value: str | None) -> dict[str, Any]:
@@ -34,18 +43,97 @@ def load_encoder(value: str | None) -> dict[str, Any]:
     return data
 
 
-CONFIG_FIELDS = {
-    "manifest": "manifest", "glob": "bags_glob", "contract": "contract", "output": "output",
-    "repo_id": "repo_id", "staging": "staging", "workers": "workers", "runner": "runner",
-    "dask_address": "dask_address", "ray_address": "ray_address", "codec": "codec",
-    "overwrite": "overwrite", "append": "append", "keep_staging": "keep_staging",
-    "chunks_size": "chunks_size", "data_files_size_in_mb": "data_files_size_in_mb",
-    "video_files_size_in_mb": "video_files_size_in_mb", "qa": "qa", "on_qa_fail": "on_qa_fail",
-    "keep_failed": "keep_failed", "msg_path": "msg_path", "fail_fast": "fail_fast", "format": "formats",
-    "hdf5_jpeg": "hdf5_jpeg_quality",
-}  # fmt: skip
-"""``convert``'s options (argparse dest) -> the :class:`ConvertConfig` field each sets (``codec``: a preset
-or file, loaded into ``encoder``); a test checks every field is reachable."""
+PRESETS: dict[str, Callable[[str | None], Any]] = {"codec": load_encoder}
+"""A :class:`CliOption`'s ``named`` preset -> what loads it into its field (``codec`` -> ``encoder``)."""
+
+
+def config_options(
+    model: type[ConvertConfig] = ConvertConfig,
+) -> Iterator[tuple[str, FieldInfo, CliOption]]:
+    """``(field name, field, its command-line option)`` of every :class:`ConvertConfig` field, in order."""
+    for name, field in model.model_fields.items():
+        yield name, field, cli_option(name, field)
+
+
+def _key(name: str, option: CliOption) -> str:
+    """The option's argparse dest and run.yaml key: the field's name, or its preset's (``codec``)."""
+    return option.named or name
+
+
+def _value_type(annotation: Any) -> Any:
+    """``annotation`` without ``| None`` and constraints (``PositiveInt | None`` -> ``int``)."""
+    if get_origin(annotation) in (Union, types.UnionType):
+        (annotation,) = [a for a in get_args(annotation) if a is not type(None)]
+    if get_origin(annotation) is Annotated:
+        annotation = get_args(annotation)[0]
+    return annotation
+
+
+def _comma_list(text: str) -> tuple[str, ...]:
+    return tuple(part.strip() for part in text.split(",") if part.strip())
+
+
+GIVEN = "config_options_given"
+"""The namespace attribute listing the run options given on the command line (:class:`_Given`)."""
+
+
+class _Given(argparse.Action):
+    """Stores the option's value (a flag's ``const``) and records that it was given, so that a value equal
+    to the default still overrides ``--config``'s."""
+
+    def __call__(
+        self, _parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any, _flag: Any = None
+    ) -> None:
+        setattr(namespace, self.dest, self.const if self.nargs == 0 else values)
+        setattr(namespace, GIVEN, {*getattr(namespace, GIVEN, ()), self.dest})
+
+
+def _argument(name: str, field: FieldInfo, option: CliOption) -> dict[str, Any]:
+    """``add_argument``'s keywords for the field: type, choices, default and metavar from its annotation."""
+    default = None if field.is_required() else field.get_default(call_default_factory=False)
+    if option.named:
+        return {"default": None, "metavar": option.metavar}
+    kind = _value_type(field.annotation)
+    if kind is bool:
+        if default is False:
+            return {"action": _Given, "nargs": 0, "const": True, "default": False}
+        return {"action": argparse.BooleanOptionalAction, "default": default}
+    if get_origin(kind) is Literal:
+        return {"choices": list(get_args(kind)), "default": default}
+    if get_origin(kind) is tuple:  # given comma-separated
+        text = None if default is None else ",".join(default)
+        return {"type": _comma_list, "default": text, "metavar": option.metavar}
+    if kind in (str, int, float):
+        return {"type": kind, "default": default, "metavar": option.metavar}
+    raise TypeError(f"ConvertConfig.{name} ({kind}): no command-line form; give it a CliOption(named=...)")
+
+
+def add_config_options(parser: argparse.ArgumentParser, model: type[ConvertConfig] = ConvertConfig) -> None:
+    """One option per :class:`ConvertConfig` field: flag, type, choices and default from the field, help
+    from its description; the fields of one :attr:`CliOption.group` mutually exclusive."""
+    groups: dict[str, argparse._MutuallyExclusiveGroup] = {}
+    for name, field, option in config_options(model):
+        target = parser if option.group is None else groups.get(option.group)
+        if target is None:
+            target = groups[str(option.group)] = parser.add_mutually_exclusive_group()
+        target.add_argument(
+            str(option.flag),
+            dest=_key(name, option),
+            help=(field.description or "").replace("%", "%%"),  # argparse formats help with %
+            **{"action": _Given, **_argument(name, field, option)},
+        )
+
+
+def resolve_options(options: Mapping[str, Any]) -> dict[str, Any]:
+    """Run options keyed as in ``run.yaml`` -> :class:`ConvertConfig`'s fields: a preset name loaded into
+    its field (``codec`` -> ``encoder``), a comma-separated list split (``formats: lerobot,hdf5``)."""
+    resolved = dict(options)
+    for name, field, option in config_options():
+        if option.named and option.named in resolved:
+            resolved[name] = PRESETS[option.named](resolved.pop(option.named))
+        elif get_origin(_value_type(field.annotation)) is tuple and isinstance(resolved.get(name), str):
+            resolved[name] = _comma_list(resolved[name])
+    return resolved
 
 
 def _config_file(path: str) -> dict[str, Any]:
@@ -60,21 +148,15 @@ def _config_file(path: str) -> dict[str, Any]:
 
 def convert_config(args: argparse.Namespace, defaults: dict[str, Any]) -> ConvertConfig:
     """The run's :class:`ConvertConfig`: the ``--config`` file's options, overridden by those given on the
-    command line (an option left at its parser default, ``defaults``, does not override the file)."""
-    from bagport.config import ConvertConfig  # noqa: PLC0415 - keep `--help` fast
-
-    given = {
-        field: getattr(args, dest)
-        for dest, field in CONFIG_FIELDS.items()
-        if getattr(args, dest) != defaults[dest]
-    }
+    command line (given: recorded by the parser, or other than the parser's ``defaults``)."""
     options = _config_file(args.config) if args.config else {}
-    for one, other in (("manifest", "bags_glob"), ("bags_glob", "manifest")):
-        if one in given:
-            options.pop(other, None)  # the command line's bag source replaces the file's
-    options.update(given)
-    if isinstance(options.get("formats"), str):
-        options["formats"] = tuple(f.strip() for f in options["formats"].split(",") if f.strip())
-    if "codec" in options or "encoder" not in options:
-        options["encoder"] = load_encoder(options.pop("codec", None))
-    return ConvertConfig(**options)
+    given: set[str] = getattr(args, GIVEN, set())
+    for name, _, option in config_options():
+        key = _key(name, option)
+        if key not in given and getattr(args, key) == defaults[key]:
+            continue
+        options[key] = getattr(args, key)
+        for other, _, other_option in config_options():  # the command line's bag source replaces the file's
+            if other != name and option.group is not None and other_option.group == option.group:
+                options.pop(_key(other, other_option), None)
+    return ConvertConfig(**resolve_options(options))

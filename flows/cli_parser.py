@@ -1,4 +1,5 @@
-"""The ``bagport`` argument parser: every command, option, default and help text, in one place.
+"""The ``bagport`` argument parser: every command, option, default and help text, in one place (``convert``'s
+run options generated from :class:`~bagport.config.ConvertConfig`'s fields by :mod:`flows.cli_config`).
 
 :mod:`flows.cli` wires each command to its handler; the docs' CLI reference (``docs/cli.md``) is
 generated from this parser by :mod:`flows.cli_reference`.
@@ -9,6 +10,8 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Mapping
 
+from bagport.config import ConvertConfig
+from flows.cli_config import add_config_options
 from flows.cli_push import add_push_command, add_push_options
 
 __all__ = ["Handler", "build_parser"]
@@ -41,114 +44,7 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
         help="a YAML file of run options, keyed as ConvertConfig's fields (manifest, bags_glob, contract, "
         "output, runner, workers, codec, formats...); options given on the command line override it",
     )
-    bags = convert.add_mutually_exclusive_group()
-    bags.add_argument(
-        "--manifest",
-        help="manifest YAML (bags: [{uri, task, metadata, start_s/end_s or start_ns/end_ns}]); see the "
-        "getting-started page",
-    )
-    bags.add_argument(
-        "--glob", help="every bag matching this glob instead of a manifest, e.g. 's3://fleet/2026-*/*.mcap'"
-    )
-    convert.add_argument(
-        "--contract", help="contract YAML (Rosetta-compatible); required (here or in --config)"
-    )
-    convert.add_argument(
-        "--output",
-        help="the dataset folder itself (LeRobot's root), local or any fsspec URI (s3://...); it must not exist "
-        "unless --overwrite or --append; required (here or in --config)",
-    )
-    convert.add_argument(
-        "--repo-id",
-        default=None,
-        help="LeRobot repo id recorded for the dataset (default: local/<name of OUT>)",
-    )
-    convert.add_argument(
-        "--staging",
-        default=None,
-        help="staging store URI (default: <output>.staging beside it), removed after success unless "
-        "--keep-staging; after a failure it keeps every finished episode (and each bag's split into episodes) "
-        "and a re-run skips them (same bag files, contract, codec, QA settings, task, --msg-path definitions "
-        "and bagport version)",
-    )
-    convert.add_argument("--workers", type=int, default=None, help="parallel episodes (default: CPU count)")
-    convert.add_argument(
-        "--runner",
-        choices=["process", "thread", "dask", "ray"],
-        default="process",
-        help="process pool (default), threads, Dask (a local cluster of worker processes, or --dask-address) "
-        "or Ray (a local instance of --workers CPUs started for the run, or --ray-address; needs the extra: "
-        "pip install 'bagport[ray]'); an address without its runner is an error (exit code 2)",
-    )
-    convert.add_argument(
-        "--dask-address", default=None, help="existing Dask scheduler, e.g. tcp://10.0.0.5:8786"
-    )
-    convert.add_argument(
-        "--ray-address",
-        default=None,
-        help="existing Ray cluster, e.g. ray://10.0.0.5:10001, or 'auto' (the cluster this machine belongs to)",
-    )
-    convert.add_argument(
-        "--codec",
-        default=None,
-        help="encoder preset name in configs/codecs or a YAML file (default: h264-fast; LeRobot's: lerobot-default)",
-    )
-    convert.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="replace an existing dataset at --output (the old dataset stays in place until the new one is "
-        "complete)",
-    )
-    convert.add_argument(
-        "--append",
-        action="store_true",
-        help="add the bags not yet in the dataset at --output as new episodes (created if missing); see the "
-        "fleet page",
-    )
-    convert.add_argument("--keep-staging", action="store_true", help="keep staged episodes after success")
-    convert.add_argument(
-        "--chunks-size", type=int, default=1000, help="files per chunk-NNN folder (default: 1000)"
-    )
-    convert.add_argument(
-        "--data-files-size-in-mb", type=float, default=100, help="data file rotation size (default: 100)"
-    )
-    convert.add_argument(
-        "--video-files-size-in-mb", type=float, default=200, help="video file rotation size (default: 200)"
-    )
-    convert.add_argument(
-        "--qa", default=None, help="QA thresholds YAML (default: built-in, see configs/qa.yaml)"
-    )
-    convert.add_argument(
-        "--on-qa-fail",
-        choices=["exclude", "keep", "fail_run"],
-        default=None,
-        help="episodes failing QA or conversion: leave out and list (exclude), keep and flag (keep), or fail "
-        "the run with nothing written (fail_run) (default: the QA file's on_fail, built-in exclude)",
-    )
-    convert.add_argument(
-        "--keep-failed",
-        action="store_true",
-        help="keep episodes labelled failed or discarded by episode events (default: leave them out, listed)",
-    )
-    convert.add_argument(
-        "--fail-fast",
-        action="store_true",
-        help="stop at the first bag that fails to convert, writing nothing (default: report it, convert the others)",
-    )
-    convert.add_argument(
-        "--format",
-        default="lerobot",
-        help="outputs, comma-separated: lerobot (default), hdf5 (ALOHA/ACT layout; extra bagport[hdf5]), robodm "
-        "(Robo-DM trajectories; extra bagport[robodm]); LeRobot's goes to --output, each other one to "
-        "<output>.<format>",
-    )
-    convert.add_argument(
-        "--hdf5-jpeg",
-        type=int,
-        default=None,
-        metavar="QUALITY",
-        help="HDF5 images as JPEG of this quality (1-100), like ALOHA's compressed episodes (default: raw uint8)",
-    )
+    add_config_options(convert)  # one option per ConvertConfig field
     convert.add_argument(
         "--push-to-hub",
         action="store_true",
@@ -261,10 +157,8 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
     synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
     synth.add_argument("--seed", type=int, default=0)
     synth.set_defaults(func=handlers["synth"])
-    for command in (convert, qa, inspect, check, init):
+    for command in (qa, inspect, check, init):  # convert's is its ConvertConfig field's
         command.add_argument(
-            "--msg-path",
-            default=None,
-            help="folder of .msg files (<pkg>/msg/<Type>.msg) for message types the bags do not embed",
+            "--msg-path", default=None, help=ConvertConfig.model_fields["msg_path"].description
         )
     return parser

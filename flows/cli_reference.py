@@ -9,6 +9,8 @@ from __future__ import annotations
 import argparse
 from collections.abc import Iterator
 
+from flows.cli_config import config_options
+
 __all__ = ["render_cli_reference"]
 
 _INTRO = """# CLI reference
@@ -32,6 +34,7 @@ def _subcommands(parser: argparse.ArgumentParser) -> Iterator[tuple[str, str, ar
 
 
 def _cell(text: str) -> str:
+    text = text.replace("%%", "%")  # argparse's escape
     return " ".join(text.split()).replace("|", "\\|").replace("<", "&lt;").replace(">", "&gt;")
 
 
@@ -77,11 +80,31 @@ def _render(parser: argparse.ArgumentParser, path: str, help_text: str, level: i
     return lines
 
 
+_KEYS_INTRO = """## Run options as keys
+
+`convert`'s options are the fields of `ConvertConfig` (`src/bagport/config.py`), so a
+`--config run.yaml` file and a deployment's `config` parameter take them as keys (see
+[Run options](options.md)); the key of each option:
+"""
+
+
+def _config_keys() -> list[str]:
+    """The run.yaml / deployment key of every ``convert`` option generated from ConvertConfig."""
+    lines = [_KEYS_INTRO, "| key | option |", "|---|---|"]
+    for name, _, option in config_options():
+        if option.named:  # a preset's name, or the field's value itself
+            lines.append(f"| `{option.named}` (a preset), or `{name}` (its settings) | `{option.flag}` |")
+        else:
+            lines.append(f"| `{name}` | `{option.flag}` |")
+    return [*lines, ""]
+
+
 def render_cli_reference(parser: argparse.ArgumentParser) -> str:
-    """The Markdown reference of ``parser`` and all its subcommands."""
+    """The Markdown reference of ``parser`` and all its subcommands, then the run options' keys."""
     lines = [_INTRO]
     for name, help_text, sub in _subcommands(parser):
         lines += _render(sub, f"{parser.prog} {name}", help_text, 2)
+    lines += _config_keys()
     return "\n".join(lines).rstrip() + "\n"
 
 

@@ -1,93 +1,155 @@
-"""The one validated configuration object a conversion run takes."""
+"""The one validated configuration object a conversion run takes, and how each of its fields is written on
+the command line (:class:`CliOption`): ``bagport convert``'s options, ``--config run.yaml`` and the Prefect
+deployments' ``config`` parameter all come from the fields below."""
 
 from __future__ import annotations
 
 import json
-from typing import Any, Literal
+from dataclasses import dataclass
+from typing import Annotated, Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt, model_validator
+from pydantic.fields import FieldInfo
 
-from bagport.video.settings import default_encoder
+__all__ = ["CliOption", "ConvertConfig", "cli_option"]
 
-__all__ = ["ConvertConfig"]
+
+@dataclass(frozen=True)
+class CliOption:
+    """How a :class:`ConvertConfig` field is written on ``bagport convert``'s command line, where it differs
+    from the defaults: ``--<field-name>``, its metavar the flag's name in capitals, its value's type, choices
+    and default read from the field, its help text the field's description.
+
+    ``named``: the option (and the run.yaml key) names a preset the application loads into the field (the
+    encoder settings: ``codec``). ``group``: the fields of one group are mutually exclusive on the command
+    line (and a group member given there replaces the others' values from ``--config``).
+    """
+
+    flag: str | None = None
+    metavar: str | None = None
+    named: str | None = None
+    group: str | None = None
+
+
+def cli_option(name: str, field: FieldInfo) -> CliOption:
+    """The field's :class:`CliOption`, its defaults filled in (flag, metavar)."""
+    given = next((m for m in field.metadata if isinstance(m, CliOption)), CliOption())
+    flag = given.flag or "--" + (given.named or name).replace("_", "-")
+    metavar = given.metavar or flag.lstrip("-").replace("-", "_").upper()
+    return CliOption(flag=flag, metavar=metavar, named=given.named, group=given.group)
+
+
+def _default_encoder() -> dict[str, Any]:
+    from bagport.video.settings import default_encoder  # noqa: PLC0415 - no numpy/av for `bagport --help`
+
+    return default_encoder()
+
+
+_BAGS = CliOption(group="bags")
 
 
 class ConvertConfig(BaseModel):
-    """Parameters of ``bagport convert`` / the Prefect ``convert`` flow."""
+    """Parameters of ``bagport convert`` / the Prefect ``convert`` flow and the deployments. Each field's
+    description is its help text on the command line (the docs' CLI reference shows it)."""
 
     model_config = ConfigDict(extra="forbid", frozen=True)
 
-    manifest: str | None = Field(default=None, description="Manifest YAML: local path or fsspec URI.")
-    bags_glob: str | None = Field(
-        default=None, description="Instead of a manifest: every bag matching this glob (local or fsspec URI)."
+    manifest: Annotated[str | None, _BAGS] = Field(
+        default=None,
+        description="manifest YAML (bags: [{uri, task, metadata, start_s/end_s or start_ns/end_ns}]); see the "
+        "getting-started page",
     )
-    contract: str = Field(description="Contract YAML: local path or fsspec URI.")
-    output: str = Field(description="Dataset root folder to create (LeRobot's `root`).")
+    bags_glob: Annotated[str | None, CliOption(flag="--glob", group="bags")] = Field(
+        default=None,
+        description="every bag matching this glob instead of a manifest, e.g. 's3://fleet/2026-*/*.mcap'",
+    )
+    contract: str = Field(description="contract YAML (Rosetta-compatible); required (here or in --config)")
+    output: str = Field(
+        description="the dataset folder itself (LeRobot's root), local or any fsspec URI (s3://...); it must "
+        "not exist unless --overwrite or --append; required (here or in --config)"
+    )
     repo_id: str | None = Field(
-        default=None, description="LeRobot repo id; default 'local/<output folder name>'."
+        default=None, description="LeRobot repo id recorded for the dataset (default: local/<name of OUT>)"
     )
     staging: str | None = Field(
-        default=None, description="Staging store URI; default '<output>.staging' beside it."
+        default=None,
+        description="staging store URI (default: <output>.staging beside it), removed after success unless "
+        "--keep-staging; after a failure it keeps every finished episode (and each bag's split into episodes) "
+        "and a re-run skips them (same bag files, contract, codec, QA settings, task, --msg-path definitions "
+        "and bagport version)",
     )
-    workers: PositiveInt | None = Field(
-        default=None, description="Parallel episode workers; default: CPU count."
-    )
+    workers: PositiveInt | None = Field(default=None, description="parallel episodes (default: CPU count)")
     runner: Literal["process", "thread", "dask", "ray"] = Field(
-        default="process", description="Task runner for the fan-out."
+        default="process",
+        description="process pool (default), threads, Dask (a local cluster of worker processes, or "
+        "--dask-address) or Ray (a local instance of --workers CPUs started for the run, or --ray-address; "
+        "needs the extra: pip install 'bagport[ray]'); an address without its runner is an error (exit code 2)",
     )
     dask_address: str | None = Field(
-        default=None,
-        description="Existing Dask scheduler (tcp://host:port); default: a local cluster of processes.",
+        default=None, description="existing Dask scheduler, e.g. tcp://10.0.0.5:8786"
     )
     ray_address: str | None = Field(
         default=None,
-        description="Existing Ray cluster (ray://head:10001, or 'auto' for the one this machine belongs to); "
-        "default: a local Ray instance with `workers` CPUs, started for the run.",
+        description="existing Ray cluster, e.g. ray://10.0.0.5:10001, or 'auto' (the cluster this machine "
+        "belongs to)",
     )
-    encoder: dict[str, Any] = Field(
-        default_factory=default_encoder,
-        description="Video encoder settings (see configs/codecs); default: H.264 (bagport.video.DEFAULT_ENCODER).",
+    encoder: Annotated[dict[str, Any], CliOption(named="codec")] = Field(
+        default_factory=_default_encoder,
+        description="encoder preset name in configs/codecs or a YAML file (default: h264-fast; LeRobot's: "
+        "lerobot-default)",
     )
-    chunks_size: PositiveInt = 1000
-    data_files_size_in_mb: PositiveFloat = 100
-    video_files_size_in_mb: PositiveFloat = 200
-    overwrite: bool = False
-    keep_staging: bool = False
+    overwrite: bool = Field(
+        default=False,
+        description="replace an existing dataset at --output (the old dataset stays in place until the new "
+        "one is complete)",
+    )
     append: bool = Field(
         default=False,
-        description="Add new episodes to the dataset at output (created if missing); bags already in it are skipped.",
+        description="add the bags not yet in the dataset at --output as new episodes (created if missing); see "
+        "the fleet page",
+    )
+    keep_staging: bool = Field(default=False, description="keep staged episodes after success")
+    chunks_size: PositiveInt = Field(default=1000, description="files per chunk-NNN folder (default: 1000)")
+    data_files_size_in_mb: PositiveFloat = Field(
+        default=100, description="data file rotation size (default: 100)"
+    )
+    video_files_size_in_mb: PositiveFloat = Field(
+        default=200, description="video file rotation size (default: 200)"
     )
     qa: str | None = Field(
-        default=None, description="QA thresholds YAML (see configs/qa.yaml); default: built-in."
+        default=None, description="QA thresholds YAML (default: built-in, see configs/qa.yaml)"
     )
     on_qa_fail: Literal["exclude", "keep", "fail_run"] | None = Field(
-        default=None, description="Override the QA file's on_fail: exclude, keep (and flag) or fail_run."
+        default=None,
+        description="episodes failing QA or conversion: leave out and list (exclude), keep and flag (keep), or "
+        "fail the run with nothing written (fail_run) (default: the QA file's on_fail, built-in exclude)",
     )
     keep_failed: bool = Field(
         default=False,
-        description="Keep episodes labelled failed or discarded by episode events (default: leave them out).",
-    )
-    msg_path: str | None = Field(
-        default=None,
-        description="Folder of .msg files (<pkg>/msg/<Type>.msg) for types the bags do not embed; "
-        "read once and sent to the workers with each episode.",
-    )
-    formats: tuple[Literal["lerobot", "hdf5", "robodm"], ...] = Field(
-        default=("lerobot",),
-        description="Outputs to write from the same staged episodes: lerobot (at output), hdf5 (ALOHA/ACT "
-        "layout, one file per episode), robodm (one Robo-DM trajectory per episode); the first non-LeRobot "
-        "one goes to output when lerobot is not asked for, the others to '<output>.<format>'.",
-    )
-    hdf5_jpeg_quality: int | None = Field(
-        default=None,
-        ge=1,
-        le=100,
-        description="HDF5 images as JPEG of this quality, like ALOHA's compressed episodes; default: raw uint8.",
+        description="keep episodes labelled failed or discarded by episode events (default: leave them out, "
+        "listed)",
     )
     fail_fast: bool = Field(
         default=False,
-        description="Stop the run at the first bag that fails to convert (or fails QA under fail_run); "
-        "default: the bag is reported and the other episodes continue.",
+        description="stop at the first bag that fails to convert, writing nothing (default: report it, convert "
+        "the others)",
+    )
+    formats: Annotated[tuple[Literal["lerobot", "hdf5", "robodm"], ...], CliOption(flag="--format")] = Field(
+        default=("lerobot",),
+        description="outputs, comma-separated: lerobot (default), hdf5 (ALOHA/ACT layout; extra bagport[hdf5]), "
+        "robodm (Robo-DM trajectories; extra bagport[robodm]); LeRobot's goes to --output, each other one to "
+        "<output>.<format>",
+    )
+    hdf5_jpeg_quality: Annotated[int | None, CliOption(flag="--hdf5-jpeg", metavar="QUALITY")] = Field(
+        default=None,
+        ge=1,
+        le=100,
+        description="HDF5 images as JPEG of this quality (1-100), like ALOHA's compressed episodes (default: "
+        "raw uint8)",
+    )
+    msg_path: str | None = Field(
+        default=None,
+        description="folder of .msg files (<pkg>/msg/<Type>.msg) for message types the bags do not embed",
     )
 
     @model_validator(mode="after")

@@ -1,20 +1,30 @@
-"""``bagport convert --config run.yaml``: one file of run options (ConvertConfig's fields), the command line
-overriding it; and every ConvertConfig field can be set from the command line."""
+"""``bagport convert``'s options are generated from ConvertConfig's fields; ``--config run.yaml``: one file
+of run options keyed as those fields, the command line overriding it."""
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import pytest
 import yaml
+from pydantic import Field
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import BagportError
 from bagport.synth import EpisodeSpec, write_episode_bag
 from flows.cli import build_parser, main
-from flows.cli_config import CONFIG_FIELDS, convert_config, load_encoder
-from tests.helpers import SAMPLE_CONTRACT
+from flows.cli_config import (
+    PRESETS,
+    add_config_options,
+    config_options,
+    convert_config,
+    load_encoder,
+    resolve_options,
+)
+from flows.cli_reference import render_cli_reference
+from tests.helpers import REPO, SAMPLE_CONTRACT
 
 
 def _config(argv: list[str]) -> ConvertConfig:
@@ -22,9 +32,60 @@ def _config(argv: list[str]) -> ConvertConfig:
     return convert_config(parser.parse_args(["convert", *argv]), vars(parser.parse_args(["convert"])))
 
 
-def test_every_config_field_has_a_command_line_option() -> None:
-    reachable = {field for field in CONFIG_FIELDS.values() if field != "codec"} | {"encoder"}
-    assert reachable == set(ConvertConfig.model_fields)
+def _convert_actions() -> dict[str, argparse.Action]:
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return {a.dest: a for a in sub.choices["convert"]._actions}
+
+
+def test_every_config_field_is_an_option_with_its_description_as_help() -> None:
+    actions = _convert_actions()
+    for name, field, option in config_options():
+        action = actions[option.named or name]
+        assert action.option_strings == [option.flag]
+        assert field.description and action.help == field.description.replace("%", "%%")
+    assert {o.named for _, _, o in config_options() if o.named} == set(PRESETS)  # each preset has a loader
+
+
+def test_types_choices_and_defaults_come_from_the_fields() -> None:
+    actions = _convert_actions()
+    assert actions["runner"].choices == ["process", "thread", "dask", "ray"]
+    assert actions["runner"].default == "process"
+    assert actions["on_qa_fail"].choices == ["exclude", "keep", "fail_run"]
+    assert (actions["workers"].type, actions["chunks_size"].default) == (int, 1000)
+    assert actions["data_files_size_in_mb"].type is float
+    assert actions["overwrite"].nargs == 0 and actions["overwrite"].default is False
+    assert actions["hdf5_jpeg_quality"].metavar == "QUALITY"
+    assert _config(
+        ["--glob", "b/*", "--contract", "c", "--output", "o", "--format", "lerobot, hdf5"]
+    ).formats == (
+        "lerobot",
+        "hdf5",
+    )
+    with pytest.raises(SystemExit):  # a bag source: a manifest or a glob, not both
+        build_parser().parse_args(["convert", "--manifest", "m.yaml", "--glob", "b/*"])
+
+
+def test_a_new_field_becomes_an_option_without_writing_it_again() -> None:
+    class Grown(ConvertConfig):
+        max_gap_s: float = Field(default=0.5, description="largest gap filled (default: 0.5)")
+        dry_run: bool = Field(default=False, description="plan only (100% safe)")
+
+    parser = argparse.ArgumentParser(prog="bagport")
+    convert = parser.add_subparsers().add_parser("convert")
+    add_config_options(convert, Grown)
+    args = parser.parse_args(["convert", "--max-gap-s", "2", "--dry-run", "--glob", "b/*"])
+    assert (args.max_gap_s, args.dry_run, args.bags_glob) == (2.0, True, "b/*")
+    assert "plan only (100% safe)" in convert.format_help()
+    reference = render_cli_reference(parser)
+    assert "| `--max-gap-s` `MAX_GAP_S` | `0.5` | largest gap filled (default: 0.5) |" in reference
+    assert "| `--dry-run` |  | plan only (100% safe) |" in reference
+
+
+def test_run_yaml_keys_resolve_as_the_command_line_does() -> None:
+    resolved = resolve_options({"codec": "archival", "formats": "hdf5,robodm", "workers": 2})
+    assert resolved == {"encoder": load_encoder("archival"), "formats": ("hdf5", "robodm"), "workers": 2}
+    assert resolve_options({"formats": ["hdf5"]}) == {"formats": ["hdf5"]}  # a list stays a list
 
 
 def test_the_command_line_overrides_the_file(tmp_path: Path) -> None:
@@ -50,6 +111,18 @@ def test_the_command_line_overrides_the_file(tmp_path: Path) -> None:
     assert config.formats == ("lerobot", "hdf5")
     assert config.keep_staging is True  # not given on the command line: the file's value stands
     assert _config(["--contract", "c.yaml", "--output", "o", "--glob", "b/*"]).encoder == load_encoder(None)
+
+
+def test_an_option_given_at_its_default_still_overrides_the_file(tmp_path: Path) -> None:
+    run = tmp_path / "run.yaml"
+    run.write_text(
+        "bags_glob: /fleet/*\ncontract: c.yaml\noutput: o\nrunner: dask\nchunks_size: 7\nformats: hdf5\n"
+    )
+    config = _config(
+        ["--config", str(run), "--runner", "process", "--chunks-size", "1000", "--format", "lerobot"]
+    )
+    assert (config.runner, config.chunks_size, config.formats) == ("process", 1000, ("lerobot",))
+    assert _config(["--config", str(run)]).runner == "dask"
 
 
 def test_a_config_that_is_not_a_mapping_is_one_paragraph(tmp_path: Path) -> None:
@@ -81,3 +154,13 @@ def test_convert_runs_from_a_config_file(tmp_path: Path) -> None:
     )
     assert main(["convert", "--config", str(run), "--quiet"]) == 0
     assert validate_dataset(out, repo_id="test/config").episodes == 2
+
+
+def test_the_example_run_yaml_is_a_valid_config() -> None:
+    config = _config(["--config", str(REPO / "configs/run.yaml")])
+    assert (config.runner, config.ray_address, config.formats) == (
+        "ray",
+        "ray://head:10001",
+        ("lerobot", "hdf5"),
+    )
+    assert config.encoder == load_encoder("h264-fast")

@@ -23,5 +23,5 @@ def test_every_command_and_option_is_listed() -> None:
         assert f"## `bagport {command}`" in page
     for option in ("`--manifest`", "`--on-qa-fail` `exclude\\|keep\\|fail_run`", "`--every`", "`--bag`"):
         assert option in page
-    assert "| `--contract` `CONTRACT` | required |" in page
+    assert "| `--contract` `CONTRACT` |  | contract YAML (Rosetta-compatible); required" in page
     assert "| `--runner` `process\\|thread\\|dask\\|ray` | `process` |" in page

@@ -211,12 +211,15 @@ async def _scenario(env: dict[str, str], tmp: Path) -> dict[str, Any]:
         for contract, output in (("sample", "re1"), ("changed", "re2")):
             run = await client.create_flow_run_from_deployment(
                 reconvert.id,
-                parameters={
-                    "manifest": "s3://fleet/manifest.yaml",
-                    "contract": f"s3://fleet/contracts/{contract}.yaml",
-                    "output": f"s3://fleet/datasets/{output}",
-                    "staging": "s3://fleet/staging/reconvert",
-                    "keep_staging": True,
+                parameters={  # a run's config replaces the deployment's: start from it
+                    "config": reconvert.parameters["config"]
+                    | {
+                        "manifest": "s3://fleet/manifest.yaml",
+                        "contract": f"s3://fleet/contracts/{contract}.yaml",
+                        "output": f"s3://fleet/datasets/{output}",
+                        "staging": "s3://fleet/staging/reconvert",
+                        "keep_staging": True,
+                    }
                 },
             )
             done = await _wait_run(client, reconvert.id, reconverts, timeout_s=240)

@@ -18,6 +18,7 @@ from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from bagport.bags.locate import locate_damage
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
+from bagport.bags.typeload import one_line
 from bagport.errors import BagReadError
 
 __all__ = ["STORAGE_ERRORS", "checked_records", "damaged_bag", "short_read"]
@@ -58,7 +59,7 @@ BagFile = Path | RemotePath
 
 
 def _one_line(err: BaseException) -> str:
-    text = " ".join(str(err).split())
+    text = one_line(err, limit=1000)
     return (
         f"{type(err).__name__}: {text}"
         if text and not isinstance(err, BagReadError)

@@ -8,6 +8,7 @@ from typing import Any
 
 from rosbags.highlevel import AnyReaderError
 
+from bagport.bags.typeload import one_line
 from bagport.errors import DecodeError
 
 __all__ = ["BagMessage", "HeaderLayout"]
@@ -75,7 +76,7 @@ class BagMessage:
             except _DAMAGED as err:
                 raise DecodeError(
                     f"the {len(self._raw)}-byte message does not deserialise as {self.msgtype} "
-                    f"({' '.join(str(err).split())}): its bytes are damaged",
+                    f"({one_line(err)}): its bytes are damaged",
                     uri=self.uri,
                     topic=self.topic,
                     t_ns=self.log_time_ns,

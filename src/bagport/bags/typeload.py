@@ -62,9 +62,10 @@ def _types_of(msgtype: str, definition_format: MessageDefinitionFormat, data: st
     return dict(get_types_from_idl(_INCLUDE.sub("", data)))
 
 
-def one_line(err: Exception, limit: int = 200) -> str:
-    """A type-system error on one line: rosbags' parser dumps the whole definition over many lines
-    (``Could not parse:`` / the text / the offset / the rest); keep where it stopped."""
+def one_line(err: BaseException, limit: int = 200) -> str:
+    """An exception's text on one line (at most ``limit`` characters), for a message of ours that quotes
+    it; rosbags' parser dumps the whole definition over many lines (``Could not parse:`` / the text / the
+    offset / the rest): of that, where it stopped."""
     lines = [line.strip() for line in str(err).splitlines() if line.strip()]
     if len(lines) >= 4 and lines[0].startswith("Could not parse") and lines[2].isdigit():
         return f"syntax error at character {lines[2]}, near {lines[3]!r}"

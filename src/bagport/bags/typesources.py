@@ -177,7 +177,7 @@ def definition_sources(
 
 def mismatch_error(uri: str, msgtype: str, source: str, err: Exception) -> DecodeError:
     """A message whose bytes do not fit the definition it is read with: one paragraph, no dump."""
-    reason = " ".join(str(err).split())[:200].rstrip(".") or type(err).__name__
+    reason = one_line(err).rstrip(".") or type(err).__name__
     if source.startswith("--msg-path"):
         fix = (
             f"the {msgtype}.msg under --msg-path is not the definition the robot recorded with: use the "

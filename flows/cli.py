@@ -133,6 +133,14 @@ def _convert(args: argparse.Namespace) -> int:
 
 def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
     """One line: what this run wrote (reused, warned) and left out, or that it had nothing to do."""
+    from bagport.run import up_to_date  # noqa: PLC0415
+
+    if up_to_date(report):
+        return (
+            f"up to date: {len(report.reused)} episode(s) reused, nothing to write at {report.root} (its run "
+            f"record has this run's write key; {report.episodes} episode(s), {report.duration_s:.1f} s of "
+            f"recordings); checked in {wall_s:.1f} s"
+        )
     if append and not report.converted and not report.reused:
         return (
             f"nothing to do: every bag is in {report.root} already ({report.episodes} episode(s), "

@@ -42,6 +42,8 @@ class PlannedEpisode:
     note: str = ""
     reused: bool = False
     """Taken from the staging store as it was (no conversion task this run)."""
+    source_stamp: str = ""
+    """The bag's stamp its staged episode was converted from (known at plan time for reused ones)."""
 
     @classmethod
     def of(cls, request: EpisodeRequest) -> PlannedEpisode:
@@ -55,6 +57,16 @@ class PlannedEpisode:
             request.label,
             request.note,
         )
+
+    def key_fields(self) -> list[Any]:
+        """Everything about this episode that decides what the dataset holds for it: the staged
+        episode (its id fixes bag, contract, encoder, window; its stamp the bag's files) and what the
+        plan puts on it. One item of a run's write key (:func:`bagport.run.write_key`)."""
+        episode_id = self.dir_uri.rstrip("/").rsplit("/", 1)[-1]
+        return [
+            episode_id, self.source_stamp, self.bag_uri, self.manifest_entry, self.metadata,
+            self.segment, self.label, self.note,
+        ]  # fmt: skip
 
     def apply(self, summary: EpisodeSummary) -> EpisodeSummary:
         """The staged summary with what the current plan decides in place of what its record says."""
@@ -119,14 +131,18 @@ def split_staged(
     candidates = [r for r in requests if r.episode_id in staged_ids]
     summaries = _read_summaries([episode_dir(r.staging_uri, r.episode_id) for r in candidates])
     reusable = {
-        r.episode_id
+        r.episode_id: s.source_stamp
         for r in candidates
         if (s := summaries.get(episode_dir(r.staging_uri, r.episode_id))) is not None
         and matches(s, r, stamp_of(r.bag_uri))
     }
     return StagedSplit(
         tuple(r for r in requests if r.episode_id not in reusable),
-        tuple(replace(PlannedEpisode.of(r), reused=True) for r in requests if r.episode_id in reusable),
+        tuple(
+            replace(PlannedEpisode.of(r), reused=True, source_stamp=reusable[r.episode_id])
+            for r in requests
+            if r.episode_id in reusable
+        ),
     )
 
 

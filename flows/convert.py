@@ -364,10 +364,11 @@ def _checked_plan(config: ConvertConfig) -> RunPlan | None:
     return plan
 
 
-def run_convert(config: ConvertConfig) -> DatasetReport:
-    """The CLI's entry: plan (and so check the inputs) before Prefect starts, then run against the
-    configured API (or one temporary local server) with that plan."""
-    _CHECKED[:] = [plan_run(config)]  # bad manifests, contracts and outputs fail here, before Prefect starts
+def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetReport:
+    """The CLI's entry: plan (and so check the inputs) before Prefect starts, unless given the plan,
+    then run against the configured API (or one temporary local server) with that plan."""
+    # bad manifests, contracts and outputs fail here, before Prefect starts
+    _CHECKED[:] = [plan if plan is not None else plan_run(config)]
     try:
         with prefect_api():
             return run_config(config)

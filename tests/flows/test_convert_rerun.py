@@ -305,3 +305,44 @@ def test_an_up_to_date_rerun_writes_nothing_and_a_change_writes_again(
     assert sorted(SUBMITTED) == ["bag_004", "bag_005", "bag_007"]
     assert report.converted == 3
     assert _files(out) != written
+
+
+def test_without_a_prefect_api_an_up_to_date_run_starts_no_flow(
+    prefect: None,
+    bags: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With bagport's temporary server (no PREFECT_API_URL), whose records end with the run, an up-to-date
+    run and an append with nothing new finish before Prefect: no flow run, the server stopped unused."""
+    manifest = _manifest(bags, "throwaway", [(4, "alice"), (5, "alice")])
+    out, staging = tmp_path / "ds", tmp_path / "staging"
+    _convert(manifest, out, staging)
+    first = _files(out)
+    flows_run: list[str] = []
+    run_convert = flows.convert.run_convert
+
+    def spy(*args: Any, **kwargs: Any) -> DatasetReport:
+        flows_run.append("flow")
+        return run_convert(*args, **kwargs)
+
+    monkeypatch.setattr(flows.convert, "run_convert", spy)
+    monkeypatch.delenv("PREFECT_API_URL")
+    monkeypatch.setenv("PREFECT_HOME", str(tmp_path / "prefect-home"))  # no profile with an API either
+    monkeypatch.chdir(tmp_path)
+    codec = tmp_path / "codec.yaml"
+    codec.write_text(yaml.safe_dump(FAST_CODEC))
+    argv = [
+        "convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--output", str(out),
+        "--staging", str(staging), "--keep-staging", "--runner", "thread", "--workers", "1",
+        "--codec", str(codec), "--quiet",
+    ]  # fmt: skip
+    capsys.readouterr()
+    assert main([*argv, "--overwrite"]) == 0
+    assert main([*argv, "--append"]) == 0
+    assert flows_run == []
+    assert _files(out) == first
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].startswith(f"up to date: 2 episode(s) reused, nothing to write at {out}")
+    assert lines[1].startswith(f"nothing to do: every bag is in {out} already (2 episode(s)")

@@ -15,8 +15,10 @@ write and :meth:`PlannedEpisode.apply` puts it on the staged summary there.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 from fsspec.core import url_to_fs
@@ -25,8 +27,9 @@ from bagport import __version__
 from bagport.errors import DatasetWriteError
 from bagport.request import EpisodeRequest
 from bagport.staging import EPISODE_SUMMARY, EpisodeSummary, episode_dir, staged_path
+from bagport.uris import is_local
 
-__all__ = ["PlannedEpisode", "StagedSplit", "list_staged", "matches", "split_staged"]
+__all__ = ["PlannedEpisode", "StagedSplit", "list_staged", "matches", "split_staged", "staged_with_prefix"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -112,6 +115,29 @@ def list_staged(staging_uri: str) -> frozenset[str]:
     except (FileNotFoundError, NotADirectoryError):
         return frozenset()
     return frozenset(str(marker).rstrip("/").rsplit("/", 2)[-2] for marker in markers)
+
+
+def staged_with_prefix(staging_uri: str, prefix: str) -> list[str]:
+    """The folders (URIs, sorted) of the completed staged episodes whose id starts with ``prefix``.
+
+    On a local disk one ``scandir`` of the store's folder names: fsspec's local ``glob`` walks every
+    staged episode's files (0.13 s per call with 2,000 staged, once per episode converted: most of a
+    2,000-bag run's CPU). On an object store a glob lists by its key prefix.
+    """
+    fs, root = url_to_fs(episode_dir(staging_uri, ""))
+    fs.invalidate_cache(url_to_fs(staging_uri)[1])  # a long-lived process may hold an older listing
+    if not is_local(fs):
+        markers = fs.glob(staged_path(root, f"{prefix}*", EPISODE_SUMMARY))
+        return sorted(str(fs.unstrip_protocol(str(m).rsplit("/", 1)[0])) for m in markers)
+    try:
+        entries = list(os.scandir(root))
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+    return sorted(
+        str(fs.unstrip_protocol(entry.path))
+        for entry in entries
+        if entry.name.startswith(prefix) and (Path(entry.path) / EPISODE_SUMMARY).is_file()
+    )
 
 
 @dataclass(frozen=True, slots=True)

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from s3fs import S3FileSystem
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
@@ -194,3 +195,23 @@ def test_a_plan_is_up_to_date_only_when_the_dataset_is_what_it_would_write(tmp_p
     assert (report.converted, len(report.reused), report.episodes) == (0, 2, 2)
     assert not (tmp_path / "staging").exists()
     assert validate_dataset(out, repo_id="test/up-to-date", decode_every=10).episodes == 2
+
+
+def test_an_object_store_dataset_is_up_to_date_by_one_listing(tmp_path: Path, s3_env: dict[str, str]) -> None:
+    """The same check on S3 (moto's real HTTP endpoint through s3fs): the run record's key, and every
+    object the run wrote there with nothing else under ``data/``."""
+    fs = S3FileSystem()
+    fs.mkdir("uptodate")
+    bags = tmp_path / "bags"
+    write_episode_bag(bags / "bag0", "mcap", EpisodeSpec(duration_s=0.5, cameras=CAMERAS))
+    config = ConvertConfig(
+        bags_glob=str(bags / "*"), contract=str(SAMPLE_CONTRACT), output="s3://uptodate/ds",
+        staging=str(tmp_path / "staging"), encoder=FAST_CODEC, keep_staging=True,
+    )  # fmt: skip
+    plan = plan_run(config)
+    reduce_run(plan, stage_all(plan))
+    again = config.model_copy(update={"overwrite": True})
+    assert plan_run(again).up_to_date
+    fs.pipe("uptodate/ds/data/chunk-000/extra.parquet", b"")
+    fs.invalidate_cache()
+    assert not plan_run(again).up_to_date

@@ -153,20 +153,18 @@ def _take_staged(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
 
 _NOT_IN_WRITE_KEY = frozenset({
     "manifest", "bags_glob", "contract", "qa", "msg_path", "on_qa_fail",  # their content is in the key
-    "output", "staging", "workers", "runner", "dask_address", "ray_address", "overwrite", "keep_staging",
-    "fail_fast",
+    "output", "staging", "workers", "runner", "dask_address", "ray_address", "overwrite", "keep_staging", "fail_fast",
 })  # fmt: skip
-"""Options that do not change what is written, or whose effect the key holds otherwise (any other
-option, a new one included, is part of the key)."""
+"""Options that do not change what is written, or whose effect the key holds otherwise (any other,
+a new one included, is part of the key)."""
 
 
 def write_key(
     plan: RunPlan, episodes: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
 ) -> str:
-    """A digest of everything that decides the dataset a run writes: its episodes in order (each
-    staged episode, its bag's stamp, and what the plan puts on it), the failures, the contract, QA
-    settings, encoder, limits, formats and the other options, and bagport's version. Kept in the run
-    record; a re-run planning the same key writes nothing (:attr:`RunPlan.up_to_date`)."""
+    """A digest of all that decides the dataset a run writes: its episodes in order (staged episode, bag
+    stamp, what the plan puts on it), failures, contract, QA, encoder, options and bagport's version.
+    Kept in the run record; a re-run planning the same key writes nothing (:attr:`RunPlan.up_to_date`)."""
     options = plan.config.model_dump(mode="json", exclude=set(_NOT_IN_WRITE_KEY))
     facts = {
         "bagport_version": __version__,
@@ -176,7 +174,12 @@ def write_key(
         "qa": plan.qa.model_dump(mode="json"),
         "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
         "repo_id": plan.config.resolved_repo_id(),
-        "episodes": [e.key_fields() for e in sorted(episodes, key=_place)],  # as written: manifest order
+        "episodes": [  # in the order they are written: the manifest's
+            e.key_fields()
+            for e in sorted(
+                episodes, key=lambda e: (e.manifest_entry, -1 if e.segment is None else e.segment)
+            )
+        ],
         "failures": sorted(
             [f.manifest_entry, f.bag_uri, -1 if f.segment is None else f.segment, f.error] for f in failures
         ),
@@ -185,14 +188,9 @@ def write_key(
     return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
 
 
-def _place(episode: PlannedEpisode) -> tuple[int, int]:
-    return episode.manifest_entry, -1 if episode.segment is None else episode.segment
-
-
 def _mark_up_to_date(plan: RunPlan) -> RunPlan:
     """The plan marked up to date when it converts nothing and the dataset at the output (replaced
-    with ``--overwrite``; LeRobot only) was written with the same key: an hourly or repeated run of
-    unchanged inputs then costs the plan alone."""
+    with ``--overwrite``; LeRobot only) was written with the same key: such a re-run costs the plan."""
     config = plan.config
     if (
         plan.requests
@@ -213,9 +211,8 @@ def finish_up_to_date(plan: RunPlan) -> DatasetReport:
     if not plan.config.keep_staging:
         _remove_staged(plan, [e.dir_uri for e in plan.reused])
     reused = tuple(_episode_name(e.bag_uri, e.segment) for e in plan.reused)
-    return replace(
-        dataset_report(plan.config.output), reused=reused, converted=0, outputs=plan.config.format_outputs()
-    )
+    report = dataset_report(plan.config.output)
+    return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs())
 
 
 def up_to_date(report: DatasetReport) -> bool:

@@ -112,10 +112,11 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
     plan = plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
-    if throwaway_api and plan.up_to_date:
-        report = finish_up_to_date(plan)
-    elif throwaway_api and not plan.requests and not plan.reused:  # an append with nothing new
-        report = dataset_report(config.output)
+    if throwaway_api and (plan.up_to_date or (not plan.requests and not plan.reused)):
+        # up to date, or an append with nothing new
+        report = finish_up_to_date(plan) if plan.up_to_date else dataset_report(config.output)
+        if show_bar:
+            print(file=sys.stderr)  # ends the "starting" line
     else:
         report = _run_flow(config, plan, show_bar)
     if not args.quiet:

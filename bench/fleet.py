@@ -5,8 +5,8 @@ Phases, each a fresh ``bagport convert`` process tree measured by :func:`bench.r
 
 - ``first 100``: the first 100 bags alone (fresh staging): the flow process's peak memory at 100 episodes;
 - ``first``: every bag (fresh staging);
-- ``no-op re-run``: the same again with ``--overwrite``: every episode is staged, none is converted,
-  the dataset is written again from the staging store;
+- ``no-op re-run``: the same again with ``--overwrite``: every episode is staged and the dataset's write
+  key is the plan's, so nothing is converted or written ("up to date");
 - ``no-op append``: ``--append`` of the same manifest into the dataset: nothing new, nothing submitted;
 - ``touched re-run``: :data:`TOUCHED` bags' files get a new modification time, then ``--overwrite``:
   exactly those convert again.

@@ -17,6 +17,7 @@ from prefect.artifacts import (
 )
 
 from bagport.dataset import DatasetReport
+from bagport.run import up_to_date
 from flows.run_story import RunCounts
 
 __all__ = ["LISTENERS", "Progress", "ProgressListener", "publish_run_artifacts", "qa_table"]
@@ -97,7 +98,11 @@ def _markdown(report: DatasetReport) -> str:
     lines = [
         f"# bagport dataset `{report.root}`",
         "",
-        f"- this run: {RunCounts.of(report).text()}",
+        (
+            f"- this run: **up to date**: {len(report.reused)} episode(s) reused, nothing written"
+            if up_to_date(report)
+            else f"- this run: {RunCounts.of(report).text()}"
+        ),
         f"- the dataset holds **{report.episodes}** episode(s)",
         f"- frames: {report.frames}, duration: {report.duration_s:.1f} s, size: {report.size_bytes / 1e6:.1f} MB",
         f"- tasks: {', '.join(report.tasks)}",

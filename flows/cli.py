@@ -22,7 +22,9 @@ from flows.cli_push import hf_token, push_from_args
 if TYPE_CHECKING:
     import pydantic
 
+    from bagport.config import ConvertConfig
     from bagport.dataset import DatasetReport
+    from bagport.run import RunPlan
 
 __all__ = ["build_parser", "main"]
 
@@ -64,11 +66,11 @@ def _progress_bar(done: int, total: int) -> None:
 def _cmd_convert(args: argparse.Namespace) -> int:
     from flows.local_server import launch, take_launched  # noqa: PLC0415 - standard library only
 
-    launch()  # the temporary Prefect server boots while the imports below run
+    server = launch()  # the temporary Prefect server boots while the imports below run
     if not args.quiet and sys.stderr.isatty():  # something from the first second (start-up takes 5-13 s)
         print("starting: planning ...", end="", file=sys.stderr, flush=True)  # the bar overwrites it
     try:
-        return _convert(args)
+        return _convert(args, throwaway_api=server is not None)
     finally:
         unused = take_launched()  # the run failed before it needed the server
         if unused is not None:
@@ -85,12 +87,14 @@ def _option_errors(err: pydantic.ValidationError) -> str:
     return "; ".join(clauses)
 
 
-def _convert(args: argparse.Namespace) -> int:
+def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
+    """Convert. With ``throwaway_api`` (a temporary Prefect server, whose records end with the run), a
+    run whose dataset is up to date, or an append with nothing new, finishes here without Prefect:
+    nothing to convert, write or record, so neither a flow run nor the server's boot is waited for."""
     import pydantic  # noqa: PLC0415
 
-    from bagport.run import summary_json  # noqa: PLC0415
-    from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
-    from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
+    from bagport.dataset.history import dataset_report  # noqa: PLC0415
+    from bagport.run import finish_up_to_date, plan_run, summary_json  # noqa: PLC0415
 
     try:
         config = convert_config(args, vars(build_parser().parse_args(["convert"])))
@@ -107,14 +111,14 @@ def _convert(args: argparse.Namespace) -> int:
         hf_token()  # before converting, not after
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
-    if show_bar:
-        LISTENERS.append(_progress_bar)
-    try:
-        report = run_convert(config)
-    finally:
+    plan = plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
+    if throwaway_api and (plan.up_to_date or (not plan.requests and not plan.reused)):
+        # up to date, or an append with nothing new
+        report = finish_up_to_date(plan) if plan.up_to_date else dataset_report(config.output)
         if show_bar:
-            LISTENERS.remove(_progress_bar)
-            print(file=sys.stderr)
+            print(file=sys.stderr)  # ends the "starting" line
+    else:
+        report = _run_flow(config, plan, show_bar)
     if not args.quiet:
         print(summary_json(report))
     for fmt, output in report.outputs.items():
@@ -131,8 +135,30 @@ def _convert(args: argparse.Namespace) -> int:
     return 1 if any(not row.get("excluded_by_label") for row in report.excluded) else 0
 
 
+def _run_flow(config: ConvertConfig, plan: RunPlan, show_bar: bool) -> DatasetReport:
+    from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
+    from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
+
+    if show_bar:
+        LISTENERS.append(_progress_bar)
+    try:
+        return run_convert(config, plan)
+    finally:
+        if show_bar:
+            LISTENERS.remove(_progress_bar)
+            print(file=sys.stderr)
+
+
 def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
     """One line: what this run wrote (reused, warned) and left out, or that it had nothing to do."""
+    from bagport.run import up_to_date  # noqa: PLC0415
+
+    if up_to_date(report):
+        return (
+            f"up to date: {len(report.reused)} episode(s) reused, nothing to write at {report.root} (its run "
+            f"record has this run's write key; {report.episodes} episode(s), {report.duration_s:.1f} s of "
+            f"recordings); checked in {wall_s:.1f} s"
+        )
     if append and not report.converted and not report.reused:
         return (
             f"nothing to do: every bag is in {report.root} already ({report.episodes} episode(s), "

@@ -20,7 +20,7 @@ from bagport.episode import EpisodeRequest
 from bagport.episode.staged import PlannedEpisode, split_staged
 from bagport.errors import BagportError, QualityError
 from bagport.request import EpisodeOutcome
-from bagport.run import EpisodeFailure, RunPlan, plan_run
+from bagport.run import EpisodeFailure, RunPlan, finish_up_to_date, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
 from flows.run_story import completed_state
@@ -57,7 +57,15 @@ def _label(uri: str) -> str:
 @flow(name="bagport-convert", flow_run_name="convert {config.output}", validate_parameters=True)
 def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
-    plan = plan_task(config)
+    plan = _checked_plan(config) or plan_task(config)
+    if plan.up_to_date:  # the same write key as the dataset at the output: nothing to convert or write
+        logger.info(
+            "up to date: %d episode(s) reused, nothing to write at %s", len(plan.reused), config.output
+        )
+        Progress(0, len(plan.reused))
+        unchanged = finish_up_to_date(plan)
+        publish_run_artifacts(unchanged)
+        return unchanged
     if not plan.requests and not plan.reused:  # an append or ingestion run with nothing new
         logger.info(
             "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
@@ -338,9 +346,31 @@ def run_config(config: ConvertConfig) -> DatasetReport:
     return result
 
 
-def run_convert(config: ConvertConfig) -> DatasetReport:
-    """The CLI's entry: check the inputs before Prefect starts, then run against the configured API
-    (or one temporary local server)."""
-    plan_run(config, reuse=False)  # bad manifests, contracts and outputs fail here, before Prefect starts
-    with prefect_api():
-        return run_config(config)
+_CHECKED: list[RunPlan] = []
+"""The plan :func:`run_convert` made before Prefect started, for the flow it then runs in this process
+(planned once per run: the listing of the staging store and the bags' stamps are not repeated)."""
+
+
+def _checked_plan(config: ConvertConfig) -> RunPlan | None:
+    """The plan checked before the flow started for this config, taken once; ``None`` if none."""
+    plan = _CHECKED.pop() if _CHECKED else None
+    if plan is None or plan.config != config:
+        return None
+    get_run_logger().info(
+        "%d bag(s) to convert, %d episode(s) staged already, from %s, contract %s (%s, %d fps)",
+        len(plan.requests), len(plan.reused), config.manifest or config.bags_glob, config.contract,
+        plan.contract.robot_type, plan.contract.fps,
+    )  # fmt: skip
+    return plan
+
+
+def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetReport:
+    """The CLI's entry: plan (and so check the inputs) before Prefect starts, unless given the plan,
+    then run against the configured API (or one temporary local server) with that plan."""
+    # bad manifests, contracts and outputs fail here, before Prefect starts
+    _CHECKED[:] = [plan if plan is not None else plan_run(config)]
+    try:
+        with prefect_api():
+            return run_config(config)
+    finally:
+        _CHECKED.clear()

@@ -6,6 +6,7 @@ functions are what it calls before and after the per-episode map.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 from collections.abc import Callable, Sequence
@@ -20,7 +21,7 @@ from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.base import read_base
-from bagport.dataset.history import converted_bags, dataset_report, record_exclusions
+from bagport.dataset.history import converted_bags, dataset_report, record_exclusions, recorded_write_key
 from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
@@ -37,12 +38,15 @@ from bagport.video import EncoderSettings
 
 __all__ = [
     "EpisodeFailure",
+    "finish_up_to_date",
     "PlannedEpisode",
     "RunPlan",
     "plan_run",
     "reduce_run",
     "segment_all",
     "stage_all",
+    "up_to_date",
+    "write_key",
 ]
 
 
@@ -59,6 +63,9 @@ class RunPlan:
     staged_ids: frozenset[str] = frozenset()
     """Every completed staged episode when the run was planned (episodes of split bags are matched
     against it once the bag is split)."""
+    up_to_date: bool = False
+    """The dataset at the output is what this run would write (the same write key, every episode
+    reused): nothing converts and nothing is written (:func:`finish_up_to_date`)."""
 
 
 def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
@@ -105,6 +112,8 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         )
     check_format_outputs(config)
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
+    # one copy shared by every request (read only): 2,000 copies of the QA settings were 15 MB
+    qa_settings, encoder = qa.model_dump(mode="json"), dict(config.encoder)
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(
@@ -115,10 +124,10 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             staging_uri=staging,
             contract_text=contract_text,
             contract_name=config.contract,
-            encoder=dict(config.encoder),
+            encoder=encoder,
             default_task=bag.task,
             metadata=bag.metadata,
-            qa=qa.model_dump(mode="json"),
+            qa=qa_settings,
             **bag.window,
             msg_definitions=msg_definitions,
         )
@@ -126,7 +135,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         if not done or (bag.uri, stamp_of(bag.uri)) not in done
     )
     plan = RunPlan(config, contract, manifest, requests, contract_text, qa)
-    return _take_staged(plan, stamp_of) if reuse else plan
+    return _mark_up_to_date(_take_staged(plan, stamp_of)) if reuse else plan
 
 
 def _take_staged(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
@@ -140,6 +149,75 @@ def _take_staged(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
         return replace(plan, staged_ids=staged_ids)
     split = split_staged(plan.requests, staged_ids, stamp_of)
     return replace(plan, requests=split.todo, reused=split.reused, staged_ids=staged_ids)
+
+
+_NOT_IN_WRITE_KEY = frozenset({
+    "manifest", "bags_glob", "contract", "qa", "msg_path", "on_qa_fail",  # their content is in the key
+    "output", "staging", "workers", "runner", "dask_address", "ray_address", "overwrite", "keep_staging", "fail_fast",
+})  # fmt: skip
+"""Options that do not change what is written, or whose effect the key holds otherwise (any other,
+a new one included, is part of the key)."""
+
+
+def write_key(
+    plan: RunPlan, episodes: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
+) -> str:
+    """A digest of all that decides the dataset a run writes: its episodes in order (staged episode, bag
+    stamp, what the plan puts on it), failures, contract, QA, encoder, options and bagport's version.
+    Kept in the run record; a re-run planning the same key writes nothing (:attr:`RunPlan.up_to_date`)."""
+    options = plan.config.model_dump(mode="json", exclude=set(_NOT_IN_WRITE_KEY))
+    facts = {
+        "bagport_version": __version__,
+        "options": options,
+        "contract_sha256": hashlib.sha256(plan.contract_text.encode()).hexdigest(),
+        "robot_type": plan.contract.robot_type,
+        "qa": plan.qa.model_dump(mode="json"),
+        "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
+        "repo_id": plan.config.resolved_repo_id(),
+        "episodes": [  # in the order they are written: the manifest's
+            e.key_fields()
+            for e in sorted(
+                episodes, key=lambda e: (e.manifest_entry, -1 if e.segment is None else e.segment)
+            )
+        ],
+        "failures": sorted(
+            [f.manifest_entry, f.bag_uri, -1 if f.segment is None else f.segment, f.error] for f in failures
+        ),
+    }
+    text = json.dumps(facts, sort_keys=True, default=str, separators=(",", ":"))
+    return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
+
+
+def _mark_up_to_date(plan: RunPlan) -> RunPlan:
+    """The plan marked up to date when it converts nothing and the dataset at the output (replaced
+    with ``--overwrite``; LeRobot only) was written with the same key: such a re-run costs the plan."""
+    config = plan.config
+    if (
+        plan.requests
+        or not plan.reused
+        or config.append
+        or not config.overwrite
+        or config.formats != ("lerobot",)
+    ):
+        return plan
+    if recorded_write_key(config.output) != write_key(plan, plan.reused):
+        return plan
+    return replace(plan, up_to_date=True)
+
+
+def finish_up_to_date(plan: RunPlan) -> DatasetReport:
+    """The report of a run whose dataset is up to date: the dataset as it stands, every episode reused,
+    none converted; the staged episodes are removed unless ``keep_staging`` (as a write would)."""
+    if not plan.config.keep_staging:
+        _remove_staged(plan, [e.dir_uri for e in plan.reused])
+    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in plan.reused)
+    report = dataset_report(plan.config.output)
+    return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs())
+
+
+def up_to_date(report: DatasetReport) -> bool:
+    """Whether the report is of a run that wrote nothing: every episode reused, no QA row written."""
+    return not report.converted and bool(report.reused) and not report.qa
 
 
 def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -> None:
@@ -224,6 +302,7 @@ def reduce_run(
     metadata, label: never the staged record's, which may come from another manifest), apply the QA
     policy, and write the dataset in manifest order."""
     summaries: list[EpisodeSummary] = []
+    stamped: list[PlannedEpisode] = []
     for episode in staged:
         summary = read_summary(episode.dir_uri)
         if summary is None:
@@ -231,6 +310,7 @@ def reduce_run(
                 f"staged episode {episode.dir_uri} is incomplete (no episode.json); re-run the conversion."
             )
         summaries.append(episode.apply(summary))
+        stamped.append(replace(episode, source_stamp=summary.source_stamp))
     fs, out_path = url_to_fs(plan.config.output)
     kept, entries = select_episodes(
         summaries,
@@ -246,6 +326,8 @@ def reduce_run(
         video_files_size_in_mb=plan.config.video_files_size_in_mb,
     )
     record = run_record(plan, staged)
+    if not plan.config.append:  # an append's record describes its own episodes only
+        record["write_key"] = write_key(plan, stamped, failures)
     # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
     record["excluded"] = [
         {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
@@ -310,6 +392,7 @@ def summary_json(report: DatasetReport) -> str:
             "excluded": list(report.excluded),
             "converted_now": report.converted,
             "reused": len(report.reused),
+            "up_to_date": up_to_date(report),
             "outputs": report.outputs,
         },
         indent=2,

@@ -8,11 +8,12 @@ from pathlib import Path
 
 import pyarrow.parquet as pq
 import pytest
+from s3fs import S3FileSystem
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import DatasetWriteError, QualityError
-from bagport.run import EpisodeFailure, PlannedEpisode, plan_run, reduce_run, stage_all
+from bagport.run import EpisodeFailure, PlannedEpisode, finish_up_to_date, plan_run, reduce_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -157,3 +158,60 @@ def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Pa
         DatasetWriteError, match=r"only in the dataset: observation\.images\.wrist.*nothing was"
     ):
         plan_run(config.model_copy(update={"contract": str(no_wrist)}))
+
+
+def test_a_plan_is_up_to_date_only_when_the_dataset_is_what_it_would_write(tmp_path: Path) -> None:
+    bags = tmp_path / "bags"
+    for i in range(2):
+        write_episode_bag(bags / f"bag{i}", "mcap", EpisodeSpec(duration_s=0.5, seed=i, cameras=CAMERAS))
+    out = tmp_path / "ds"
+    config = ConvertConfig(
+        bags_glob=str(bags / "*"), contract=str(SAMPLE_CONTRACT), output=str(out),
+        staging=str(tmp_path / "staging"), encoder=FAST_CODEC, keep_staging=True,
+    )  # fmt: skip
+    plan = plan_run(config)
+    assert not plan.up_to_date
+    reduce_run(plan, stage_all(plan))
+    again = config.model_copy(update={"overwrite": True})
+    plan = plan_run(again)
+    assert (plan.up_to_date, plan.requests, len(plan.reused)) == (True, (), 2)
+    # options that change the output, or another format, or an append: not up to date
+    assert not plan_run(again.model_copy(update={"data_files_size_in_mb": 1.0})).up_to_date
+    assert not plan_run(again.model_copy(update={"repo_id": "someone/else"})).up_to_date
+    # a file LeRobot would read that the run did not write, or one it wrote missing: written again
+    stray = out / "data/chunk-000/extra.parquet"  # (repair removes a stray file-NNN after the last one)
+    stray.write_bytes(b"")
+    assert not plan_run(again).up_to_date
+    stray.unlink()
+    assert plan_run(again).up_to_date
+    (out / "meta/stats.json").rename(tmp_path / "stats.json")
+    assert not plan_run(again).up_to_date
+    (tmp_path / "stats.json").rename(out / "meta/stats.json")
+    # without --overwrite an existing output is refused as before
+    with pytest.raises(DatasetWriteError, match="already exists"):
+        plan_run(config)
+    # the up-to-date run without --keep-staging removes the staged episodes, as a write would
+    report = finish_up_to_date(plan_run(again.model_copy(update={"keep_staging": False})))
+    assert (report.converted, len(report.reused), report.episodes) == (0, 2, 2)
+    assert not (tmp_path / "staging").exists()
+    assert validate_dataset(out, repo_id="test/up-to-date", decode_every=10).episodes == 2
+
+
+def test_an_object_store_dataset_is_up_to_date_by_one_listing(tmp_path: Path, s3_env: dict[str, str]) -> None:
+    """The same check on S3 (moto's real HTTP endpoint through s3fs): the run record's key, and every
+    object the run wrote there with nothing else under ``data/``."""
+    fs = S3FileSystem()
+    fs.mkdir("uptodate")
+    bags = tmp_path / "bags"
+    write_episode_bag(bags / "bag0", "mcap", EpisodeSpec(duration_s=0.5, cameras=CAMERAS))
+    config = ConvertConfig(
+        bags_glob=str(bags / "*"), contract=str(SAMPLE_CONTRACT), output="s3://uptodate/ds",
+        staging=str(tmp_path / "staging"), encoder=FAST_CODEC, keep_staging=True,
+    )  # fmt: skip
+    plan = plan_run(config)
+    reduce_run(plan, stage_all(plan))
+    again = config.model_copy(update={"overwrite": True})
+    assert plan_run(again).up_to_date
+    fs.pipe("uptodate/ds/data/chunk-000/extra.parquet", b"")
+    fs.invalidate_cache()
+    assert not plan_run(again).up_to_date

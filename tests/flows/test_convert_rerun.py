@@ -4,6 +4,7 @@ metadata) is applied when the dataset is written, never taken from a staged epis
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import time
@@ -16,6 +17,14 @@ import pandas as pd
 import pyarrow.parquet as pq
 import pytest
 import yaml
+from prefect.client.orchestration import get_client
+from prefect.client.schemas.filters import (
+    ArtifactFilter,
+    ArtifactFilterFlowRunId,
+    FlowRunFilter,
+    FlowRunFilterId,
+)
+from prefect.client.schemas.sorting import FlowRunSort
 from prefect.task_runners import ThreadPoolTaskRunner
 
 import flows.convert
@@ -214,3 +223,126 @@ def test_small_episodes_share_a_task_run_and_each_bag_fails_alone(
     assert "conversion failed" in report.excluded[0]["reason"]
     episodes = _record(tmp_path / "ds")["episodes"]
     assert [Path(e["bag_uri"]).name for e in episodes] == ["bag_004", "bag_005", "bag_007"]
+
+
+def _files(root: Path) -> dict[str, tuple[bytes, int]]:
+    """Every file of the dataset: its bytes and modification time."""
+    return {
+        p.relative_to(root).as_posix(): (p.read_bytes(), p.stat().st_mtime_ns)
+        for p in sorted(root.rglob("*"))
+        if p.is_file()
+    }
+
+
+async def _latest_run() -> tuple[list[str], dict[str, Any]]:
+    """The newest flow run's task run names and artifacts (through the Prefect API)."""
+    async with get_client() as client:
+        run = (await client.read_flow_runs(sort=FlowRunSort.START_TIME_DESC, limit=1))[0]
+        tasks = await client.read_task_runs(flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=[run.id])))
+        artifacts = await client.read_artifacts(
+            artifact_filter=ArtifactFilter(flow_run_id=ArtifactFilterFlowRunId(any_=[run.id]))
+        )
+        return sorted(t.name for t in tasks), {str(a.key): a.data for a in artifacts if a.key}
+
+
+def test_an_up_to_date_rerun_writes_nothing_and_a_change_writes_again(
+    prefect: None, bags: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    manifest = _manifest(bags, "uptodate", [(4, "alice"), (5, "alice"), (7, "alice")])
+    out, staging = tmp_path / "ds", tmp_path / "staging"
+    _convert(manifest, out, staging)
+    first = _files(out)
+    codec = tmp_path / "codec.yaml"
+    codec.write_text(yaml.safe_dump(FAST_CODEC))
+    argv = [
+        "convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--output", str(out),
+        "--staging", str(staging), "--keep-staging", "--overwrite", "--runner", "thread", "--workers", "1",
+        "--codec", str(codec),
+    ]  # fmt: skip
+    capsys.readouterr()
+    SUBMITTED.clear()
+    assert main(argv) == 0
+    # no task run at all (no plan task either: the CLI planned before Prefect started), nothing written
+    assert SUBMITTED == []
+    task_runs, artifacts = asyncio.run(_latest_run())
+    assert task_runs == []
+    assert _files(out) == first
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
+    assert (summary["up_to_date"], summary["reused"], summary["converted_now"]) == (True, 3, 0)
+    assert f"up to date: 3 episode(s) reused, nothing to write at {out}" in captured.err
+    assert "**up to date**: 3 episode(s) reused" in artifacts["bagport-summary"]
+
+    # another option that changes the output (file size limits): written again, from the staging store
+    report, submitted = _convert(manifest, out, staging, overwrite=True, chunks_size=2)
+    assert (submitted, report.converted, len(report.reused)) == ([], 0, 3)
+    assert _files(out) != first
+
+    # the same options again: up to date
+    written = _files(out)
+    report, submitted = _convert(manifest, out, staging, overwrite=True, chunks_size=2)
+    assert (submitted, len(report.reused), report.qa) == ([], 3, ())
+    assert _files(out) == written
+
+    # a bag whose files changed: that one converts, and the dataset is written
+    touched = next((bags / "bag_007").glob("*.mcap"))
+    stat = touched.stat()
+    os.utime(touched, ns=(stat.st_atime_ns, stat.st_mtime_ns + 1_000_000_000))
+    report, submitted = _convert(manifest, out, staging, overwrite=True, chunks_size=2)
+    assert (submitted, report.converted) == (["bag_007"], 1)
+    assert _files(out) != written
+
+    # another contract (the same features, one comment more): every episode converts again
+    contract = tmp_path / "contract.yaml"
+    contract.write_text(SAMPLE_CONTRACT.read_text() + "\n# revised\n")
+    written = _files(out)
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(contract), output=str(out), staging=str(staging),
+        encoder=FAST_CODEC, runner="thread", workers=1, keep_staging=True, overwrite=True, chunks_size=2,
+    )  # fmt: skip
+    SUBMITTED.clear()
+    report = run_config(config)
+    assert sorted(SUBMITTED) == ["bag_004", "bag_005", "bag_007"]
+    assert report.converted == 3
+    assert _files(out) != written
+
+
+def test_without_a_prefect_api_an_up_to_date_run_starts_no_flow(
+    prefect: None,
+    bags: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """With bagport's temporary server (no PREFECT_API_URL), whose records end with the run, an up-to-date
+    run and an append with nothing new finish before Prefect: no flow run, the server stopped unused."""
+    manifest = _manifest(bags, "throwaway", [(4, "alice"), (5, "alice")])
+    out, staging = tmp_path / "ds", tmp_path / "staging"
+    _convert(manifest, out, staging)
+    first = _files(out)
+    flows_run: list[str] = []
+    run_convert = flows.convert.run_convert
+
+    def spy(*args: Any, **kwargs: Any) -> DatasetReport:
+        flows_run.append("flow")
+        return run_convert(*args, **kwargs)
+
+    monkeypatch.setattr(flows.convert, "run_convert", spy)
+    monkeypatch.delenv("PREFECT_API_URL")
+    monkeypatch.setenv("PREFECT_HOME", str(tmp_path / "prefect-home"))  # no profile with an API either
+    monkeypatch.chdir(tmp_path)
+    codec = tmp_path / "codec.yaml"
+    codec.write_text(yaml.safe_dump(FAST_CODEC))
+    argv = [
+        "convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--output", str(out),
+        "--staging", str(staging), "--keep-staging", "--runner", "thread", "--workers", "1",
+        "--codec", str(codec), "--quiet",
+    ]  # fmt: skip
+    capsys.readouterr()
+    assert main([*argv, "--overwrite"]) == 0
+    assert main([*argv, "--append"]) == 0
+    assert flows_run == []
+    assert _files(out) == first
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[0].startswith(f"up to date: 2 episode(s) reused, nothing to write at {out}")
+    assert lines[1].startswith(f"nothing to do: every bag is in {out} already (2 episode(s)")

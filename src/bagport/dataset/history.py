@@ -9,10 +9,17 @@ import pandas as pd
 from fsspec.core import url_to_fs
 
 from bagport.dataset.base import read_base
-from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, INFO_PATH, TASKS_PATH
+from bagport.dataset.checksums import latest_record
+from bagport.dataset.layout import (
+    APPEND_RUN_RECORD_PATH,
+    INFO_PATH,
+    JOURNAL_PATH,
+    RUN_RECORD_PATH,
+    TASKS_PATH,
+)
 from bagport.dataset.write import DatasetReport
 
-__all__ = ["converted_bags", "dataset_report", "record_exclusions"]
+__all__ = ["converted_bags", "dataset_report", "record_exclusions", "recorded_write_key"]
 
 
 def converted_bags(root: str) -> set[tuple[str, str]]:
@@ -61,3 +68,34 @@ def record_exclusions(root: str, run_record: dict[str, Any]) -> str:
     with fs.open(record_path, "w", encoding="utf-8") as handle:
         json.dump({**run_record, "episodes": []}, handle, indent=2, default=str)
     return str(fs.unstrip_protocol(record_path))
+
+
+def recorded_write_key(root: str) -> str | None:
+    """The write key of the run that wrote the dataset at ``root`` as it stands, or ``None`` when it
+    cannot be trusted to be that run's output without writing it again.
+
+    Cheap, from one listing of the dataset (no file is hashed): no write is pending (no intent
+    record, no half-done replace or append); the newest run record is ``run.json`` (no append since)
+    and holds a ``write_key``; every file it lists is there and nothing unlisted sits under ``data/``
+    or ``videos/`` (what LeRobot would read). ``bagport validate`` hashes every file.
+    """
+    fs, path = url_to_fs(root)
+    base = path.rstrip("/")
+    try:
+        listed = {str(p)[len(base) + 1 :] for p in fs.find(base)}
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    if not listed or JOURNAL_PATH in listed or any(".old-" in p for p in listed):
+        return None
+    if latest_record([p for p in listed if p.startswith("meta/provenance/")]) != RUN_RECORD_PATH:
+        return None
+    with fs.open(f"{base}/{RUN_RECORD_PATH}", "r", encoding="utf-8") as handle:
+        record = json.load(handle)
+    key = record.get("write_key")
+    files = set(record.get("files", {}))
+    if not isinstance(key, str) or not files or not record.get("files_complete", False):
+        return None
+    readable = {p for p in listed if p.startswith(("data/", "videos/"))}
+    if not files <= listed or not readable <= files:
+        return None
+    return key

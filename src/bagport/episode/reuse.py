@@ -22,23 +22,20 @@ from typing import Any
 
 import fsspec
 import numpy as np
-from fsspec.core import url_to_fs
 
 from bagport import __version__
 from bagport.contract import FeatureKind
 from bagport.decode.video import decoder_settings
 from bagport.episode.alignment import Alignment
+from bagport.episode.staged import staged_with_prefix
 from bagport.qa import CheckResult
 from bagport.request import EpisodeRequest, msg_definitions_sha256
 from bagport.staging import (
-    EPISODE_SUMMARY,
     QA_FILE,
     STATS_FILE,
     EpisodeSummary,
     StagedFeature,
-    episode_dir,
     read_summary,
-    staged_path,
 )
 
 __all__ = ["ReusedClip", "clip_keys", "find_reusable_clips"]
@@ -105,12 +102,9 @@ def clip_keys(
 def _earlier_episodes(request: EpisodeRequest) -> list[EpisodeSummary]:
     """Completed staged episodes of the same bag URI under other contracts or settings."""
     stem = request.episode_id.rsplit("-", 1)[0]  # episode ids are <bag name>-<digest>
-    fs, path = url_to_fs(episode_dir(request.staging_uri, f"{stem}-*"))
-    # a long-lived worker (Dask, Ray) keeps fsspec's listing cache across runs: list the store as it is now
-    fs.invalidate_cache(url_to_fs(request.staging_uri)[1])
     found = []
-    for marker in sorted(fs.glob(staged_path(path, EPISODE_SUMMARY))):
-        summary = read_summary(fs.unstrip_protocol(marker.rsplit("/", 1)[0]))
+    for folder in staged_with_prefix(request.staging_uri, f"{stem}-"):  # the store as it is now
+        summary = read_summary(folder)
         if (
             summary is not None
             and summary.bag_uri == request.bag_uri

@@ -15,8 +15,10 @@ write and :meth:`PlannedEpisode.apply` puts it on the staged summary there.
 from __future__ import annotations
 
 import json
+import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
+from pathlib import Path
 from typing import Any
 
 from fsspec.core import url_to_fs
@@ -25,8 +27,9 @@ from bagport import __version__
 from bagport.errors import DatasetWriteError
 from bagport.request import EpisodeRequest
 from bagport.staging import EPISODE_SUMMARY, EpisodeSummary, episode_dir, staged_path
+from bagport.uris import is_local
 
-__all__ = ["PlannedEpisode", "StagedSplit", "list_staged", "matches", "split_staged"]
+__all__ = ["PlannedEpisode", "StagedSplit", "list_staged", "matches", "split_staged", "staged_with_prefix"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -42,6 +45,8 @@ class PlannedEpisode:
     note: str = ""
     reused: bool = False
     """Taken from the staging store as it was (no conversion task this run)."""
+    source_stamp: str = ""
+    """The bag's stamp its staged episode was converted from (known at plan time for reused ones)."""
 
     @classmethod
     def of(cls, request: EpisodeRequest) -> PlannedEpisode:
@@ -55,6 +60,16 @@ class PlannedEpisode:
             request.label,
             request.note,
         )
+
+    def key_fields(self) -> list[Any]:
+        """Everything about this episode that decides what the dataset holds for it: the staged
+        episode (its id fixes bag, contract, encoder, window; its stamp the bag's files) and what the
+        plan puts on it. One item of a run's write key (:func:`bagport.run.write_key`)."""
+        episode_id = self.dir_uri.rstrip("/").rsplit("/", 1)[-1]
+        return [
+            episode_id, self.source_stamp, self.bag_uri, self.manifest_entry, self.metadata,
+            self.segment, self.label, self.note,
+        ]  # fmt: skip
 
     def apply(self, summary: EpisodeSummary) -> EpisodeSummary:
         """The staged summary with what the current plan decides in place of what its record says."""
@@ -102,6 +117,29 @@ def list_staged(staging_uri: str) -> frozenset[str]:
     return frozenset(str(marker).rstrip("/").rsplit("/", 2)[-2] for marker in markers)
 
 
+def staged_with_prefix(staging_uri: str, prefix: str) -> list[str]:
+    """The folders (URIs, sorted) of the completed staged episodes whose id starts with ``prefix``.
+
+    On a local disk one ``scandir`` of the store's folder names: fsspec's local ``glob`` walks every
+    staged episode's files (0.13 s per call with 2,000 staged, once per episode converted: most of a
+    2,000-bag run's CPU). On an object store a glob lists by its key prefix.
+    """
+    fs, root = url_to_fs(episode_dir(staging_uri, ""))
+    fs.invalidate_cache(url_to_fs(staging_uri)[1])  # a long-lived process may hold an older listing
+    if not is_local(fs):
+        markers = fs.glob(staged_path(root, f"{prefix}*", EPISODE_SUMMARY))
+        return sorted(str(fs.unstrip_protocol(str(m).rsplit("/", 1)[0])) for m in markers)
+    try:
+        entries = list(os.scandir(root))
+    except (FileNotFoundError, NotADirectoryError):
+        return []
+    return sorted(
+        str(fs.unstrip_protocol(entry.path))
+        for entry in entries
+        if entry.name.startswith(prefix) and (Path(entry.path) / EPISODE_SUMMARY).is_file()
+    )
+
+
 @dataclass(frozen=True, slots=True)
 class StagedSplit:
     todo: tuple[EpisodeRequest, ...]
@@ -119,14 +157,18 @@ def split_staged(
     candidates = [r for r in requests if r.episode_id in staged_ids]
     summaries = _read_summaries([episode_dir(r.staging_uri, r.episode_id) for r in candidates])
     reusable = {
-        r.episode_id
+        r.episode_id: s.source_stamp
         for r in candidates
         if (s := summaries.get(episode_dir(r.staging_uri, r.episode_id))) is not None
         and matches(s, r, stamp_of(r.bag_uri))
     }
     return StagedSplit(
         tuple(r for r in requests if r.episode_id not in reusable),
-        tuple(replace(PlannedEpisode.of(r), reused=True) for r in requests if r.episode_id in reusable),
+        tuple(
+            replace(PlannedEpisode.of(r), reused=True, source_stamp=reusable[r.episode_id])
+            for r in requests
+            if r.episode_id in reusable
+        ),
     )
 
 

@@ -6,11 +6,12 @@ import os
 from dataclasses import replace
 from pathlib import Path
 
+import fsspec
 import pytest
 
 from bagport.bags import source_stamp
 from bagport.episode import convert_episode
-from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
+from bagport.episode.staged import PlannedEpisode, list_staged, split_staged, staged_with_prefix
 from bagport.errors import DatasetWriteError
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import episode_request
@@ -25,6 +26,21 @@ def test_a_missing_or_empty_staging_store_holds_nothing(tmp_path: Path) -> None:
     assert list_staged(str(tmp_path / "nowhere")) == frozenset()
     (tmp_path / "empty" / "episodes").mkdir(parents=True)
     assert list_staged(str(tmp_path / "empty")) == frozenset()
+
+
+@pytest.mark.parametrize("store", ["local", "memory"])
+def test_staged_episodes_of_a_bag_are_found_by_their_id_prefix(tmp_path: Path, store: str) -> None:
+    """Completed ones only (``episode.json`` is written last), and ``bag1-`` is not ``bag10-``."""
+    staging = str(tmp_path / "staging") if store == "local" else f"memory://{tmp_path.name}/staging"
+    fs, root = fsspec.core.url_to_fs(staging)
+    for name, complete in (("bag1-aaa", True), ("bag1-bbb", False), ("bag10-ccc", True), ("bag1-ddd", True)):
+        fs.makedirs(f"{root}/episodes/{name}", exist_ok=True)
+        fs.pipe(f"{root}/episodes/{name}/{'episode.json' if complete else 'frames.parquet'}", b"{}")
+    found = staged_with_prefix(staging, "bag1-")
+    assert [uri.rsplit("/", 1)[-1] for uri in found] == ["bag1-aaa", "bag1-ddd"]
+    assert all(fsspec.core.url_to_fs(uri)[1].startswith(root) for uri in found)
+    assert staged_with_prefix(staging, "bag2-") == []
+    assert staged_with_prefix(str(tmp_path / "nowhere"), "bag1-") == []
 
 
 def test_only_episodes_staged_with_the_same_key_are_reused(tmp_path: Path) -> None:

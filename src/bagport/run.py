@@ -248,7 +248,9 @@ def reduce_run(
     record = run_record(plan, staged)
     # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
     record["excluded"] = [
-        {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
+        replace(e.brief(), source_stamp=source_stamp(e.qa.bag_uri)).to_json()
+        for e in entries
+        if e.episode_index is None
     ]
     if not kept:  # an append whose new bags were all excluded: recorded, nothing written
         record_exclusions(plan.config.output, record)
@@ -307,7 +309,7 @@ def summary_json(report: DatasetReport) -> str:
             "tasks": list(report.tasks),
             "videos": list(report.video_keys),
             "size_bytes": report.size_bytes,
-            "excluded": list(report.excluded),
+            "excluded": [row.to_json() for row in report.excluded],
             "converted_now": report.converted,
             "reused": len(report.reused),
             "outputs": report.outputs,

@@ -71,7 +71,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     """
     contract_text = read_text(config.contract, "contract")
     contract = parse_contract(contract_text, config.contract)
-    EncoderSettings.from_dict(config.encoder)
+    encoder = EncoderSettings.from_dict(config.encoder)
     qa = load_qa_config(read_text(config.qa, "qa") if config.qa else None, config.qa or "qa.yaml")
     if config.on_qa_fail is not None:
         qa = qa.model_copy(update={"on_fail": config.on_qa_fail})
@@ -108,17 +108,17 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(
-                bag.uri, contract_text, config.encoder, window_key(bag.window), msg_definitions
+                bag.uri, contract_text, encoder, window_key(bag.window), msg_definitions
             ),
             bag_uri=bag.uri,
             manifest_entry=bag.entry,
             staging_uri=staging,
             contract_text=contract_text,
             contract_name=config.contract,
-            encoder=dict(config.encoder),
+            encoder=encoder,
             default_task=bag.task,
             metadata=bag.metadata,
-            qa=qa.model_dump(mode="json"),
+            qa=qa,
             **bag.window,
             msg_definitions=msg_definitions,
         )

@@ -11,6 +11,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from pydantic import JsonValue
+
 from bagport.align import NS_PER_S
 from bagport.qa.config import QAConfig
 from bagport.video.settings import EncoderSettings
@@ -30,7 +32,7 @@ class EpisodeRequest:
     """The checked encoder settings (``ConvertConfig.encoder``, a preset's keys, is converted when the
     run is planned)."""
     default_task: str | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
     qa: QAConfig = field(default_factory=QAConfig)
     """QA thresholds (the defaults unless the run gives a QA file)."""
     start_ns: int | None = None

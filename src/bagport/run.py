@@ -27,7 +27,7 @@ from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError
 from bagport.formats import check_format_outputs, write_formats
-from bagport.manifest import Manifest, load_manifest, parse_manifest
+from bagport.manifest import Manifest, ManifestWindow, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
 from bagport.segment import kept_segmentation, segment_request, segments_bags
 from bagport.selection import EpisodeFailure, select_episodes
@@ -164,7 +164,7 @@ def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -
     )
 
 
-def window_key(window: dict[str, Any]) -> str:
+def window_key(window: ManifestWindow) -> str:
     """A manifest window as the text its request's :meth:`EpisodeRequest.window_key` gives."""
     if not window:
         return ""

@@ -17,9 +17,9 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 from fsspec.core import url_to_fs
+from pydantic import JsonValue
 
 from bagport import __version__
 from bagport.errors import DatasetWriteError
@@ -36,7 +36,7 @@ class PlannedEpisode:
     dir_uri: str
     bag_uri: str
     manifest_entry: int
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
     segment: int | None = None
     label: str | None = None
     note: str = ""

@@ -5,6 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
+from pydantic import JsonValue
+
 from bagport.qa.config import Gate
 
 __all__ = [
@@ -153,7 +155,7 @@ class QAEntry:
     note: str = ""
     by_label: bool = False
     """Left out because of its label (failed / discarded), not by QA."""
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
     """The episode's metadata: its manifest entry's columns (``robot_id``...) and the recorder's
     ``episode_id`` from episode events."""
 
@@ -212,7 +214,7 @@ class QABrief:
     label: str | None
     note: str
     excluded_by_label: bool
-    metadata: dict[str, Any]
+    metadata: dict[str, JsonValue]
     """The manifest entry's columns and the recorder's ``episode_id`` (user data, as in the manifest)."""
     source_stamp: str | None = None
     """The bag's :func:`bagport.bags.source_stamp` when it was left out (kept in the run record, so an

@@ -18,8 +18,8 @@ import yaml
 from pydantic_core import ErrorDetails
 
 __all__ = [
-    "YamlJson",
     "ValidationProblem",
+    "YamlJson",
     "YamlSource",
     "explain_validation",
     "load_plain",

@@ -5,13 +5,15 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from pydantic import JsonValue
+
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.staging import EpisodeSummary
 from bagport.video.settings import EncoderSettings
 from tests.conftest import REALBAGS, REPO
 
 SAMPLE_CONTRACT = REPO / "configs" / "contracts" / "sample_robot.yaml"
-FAST_CODEC = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+FAST_CODEC: dict[str, JsonValue] = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 """Near-lossless and quick: for tests that check pixels exactly, not the default codec."""
 FAST_SETTINGS = EncoderSettings.from_dict(FAST_CODEC)
 """:data:`FAST_CODEC` as the settings a worker gets."""

@@ -19,6 +19,7 @@ from pathlib import Path
 
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from bagport.video.settings import EncoderSettings
 
 CONTRACT = """\
 robot_type: bench
@@ -74,7 +75,12 @@ def main() -> None:
         subprocess.run(again, check=True)
         return
     request = EpisodeRequest(
-        episode_id_for(str(bag), contract, {}), str(bag), 0, str(work / "staging"), contract, "bench", {}
+        episode_id_for(str(bag), contract, EncoderSettings()),
+        str(bag),
+        0,
+        str(work / "staging"),
+        contract,
+        "bench",
     )
     started = time.perf_counter()
     summary = convert_episode(request)

@@ -26,9 +26,10 @@ from bagport.formats.hdf5 import write_hdf5_dataset
 from bagport.formats.robodm import trajectory_class, write_robodm_dataset
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from bagport.video.settings import EncoderSettings
 from bench.episode_memory import CONTRACT
 
-CODEC = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+CODEC = EncoderSettings.from_dict({"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2})
 
 
 def _stage(seconds: float, work: Path) -> Path:

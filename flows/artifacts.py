@@ -70,24 +70,18 @@ def qa_table(report: DatasetReport) -> list[dict[str, Any]]:
     """One row per bag: where it went, QA score and verdict, video fidelity, and why."""
     return [
         {
-            "bag": _episode_name(row),
-            "episode_index": "excluded" if row["episode_index"] is None else row["episode_index"],
-            "score": row["score"],
-            "verdict": row["verdict"],
-            "frames": row["frames"],
-            "video PSNR min (dB)": row.get("video_psnr_min_db"),
-            "video damaged frames": row.get("video_damaged_frames"),
-            "label": row.get("label"),
-            "reason": row["reason"],
+            "bag": row.name,
+            "episode_index": "excluded" if row.episode_index is None else row.episode_index,
+            "score": row.score,
+            "verdict": row.verdict,
+            "frames": row.frames,
+            "video PSNR min (dB)": row.video_psnr_min_db,
+            "video damaged frames": row.video_damaged_frames,
+            "label": row.label,
+            "reason": row.reason,
         }
         for row in report.qa
     ]
-
-
-def _episode_name(row: dict[str, Any]) -> str:
-    """The bag's name, with ``#<n>`` for one of several episodes in a bag."""
-    name = str(row["bag_uri"]).rstrip("/").rsplit("/", 1)[-1]
-    return name if row.get("segment") is None else f"{name}#{row['segment']}"
 
 
 _LISTED = 200
@@ -117,7 +111,7 @@ def _markdown(report: DatasetReport) -> str:
             lines.append(f"- ... and {len(report.reused) - _LISTED} more (the run record lists every one)")
     if report.excluded:
         lines += ["", "## Excluded", ""]
-        lines += [f"- `{_episode_name(row)}` ({row['bag_uri']}): {row['reason']}" for row in report.excluded]
+        lines += [f"- `{row.name}` ({row.bag_uri}): {row.reason}" for row in report.excluded]
     return "\n".join(lines)
 
 

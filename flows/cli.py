@@ -126,13 +126,13 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
             print(f"wrote {fmt} at {output}", file=sys.stderr)
     wall_s = time.perf_counter() - started
     for row in report.excluded:
-        where = row["bag_uri"] + ("" if row.get("segment") is None else f"#{row['segment']}")
-        print(f"excluded bags[{row['manifest_entry']}] {where}: {row['reason']}", file=sys.stderr)
+        where = row.bag_uri + ("" if row.segment is None else f"#{row.segment}")
+        print(f"excluded bags[{row.manifest_entry}] {where}: {row.reason}", file=sys.stderr)
     print(_summary_line(report, args.append, wall_s), file=sys.stderr)
     if args.push_to_hub:
         push_from_args(report.outputs.get("lerobot", report.root), config.resolved_repo_id(), args)
     # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
-    return 1 if any(not row.get("excluded_by_label") for row in report.excluded) else 0
+    return 1 if any(not row.excluded_by_label for row in report.excluded) else 0
 
 
 def _run_flow(config: ConvertConfig, plan: RunPlan, show_bar: bool) -> DatasetReport:

@@ -34,10 +34,10 @@ class RunCounts:
 
     @classmethod
     def of(cls, report: DatasetReport) -> RunCounts:
-        kept = [row for row in report.qa if row.get("episode_index") is not None]
+        kept = [row for row in report.qa if row.episode_index is not None]
         return cls(
             converted=len(kept),
-            warned=sum(row.get("verdict") == "warn" for row in kept),
+            warned=sum(row.verdict == "warn" for row in kept),
             excluded=len(report.excluded),
             reused=len(report.reused),
         )

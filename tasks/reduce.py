@@ -34,5 +34,5 @@ def reduce_task(
     for fmt, output in report.outputs.items():
         logger.info("wrote %s at %s", fmt, output)
     for row in report.excluded:
-        logger.warning("excluded %s: %s", row["bag_uri"], row["reason"])
+        logger.warning("excluded %s: %s", row.bag_uri, row.reason)
     return report

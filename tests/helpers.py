@@ -5,16 +5,22 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+from pydantic import JsonValue
+
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.staging import EpisodeSummary
+from bagport.video.settings import EncoderSettings
 from tests.conftest import REALBAGS, REPO
 
 SAMPLE_CONTRACT = REPO / "configs" / "contracts" / "sample_robot.yaml"
-FAST_CODEC = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
+FAST_CODEC: dict[str, JsonValue] = {"codec": "libx264", "crf": 18, "preset": "ultrafast", "g": 2}
 """Near-lossless and quick: for tests that check pixels exactly, not the default codec."""
+FAST_SETTINGS = EncoderSettings.from_dict(FAST_CODEC)
+""":data:`FAST_CODEC` as the settings a worker gets."""
 
 __all__ = [
     "FAST_CODEC",
+    "FAST_SETTINGS",
     "REALBAGS",
     "REPO",
     "SAMPLE_CONTRACT",
@@ -45,7 +51,7 @@ def episode_request(
 ) -> EpisodeRequest:
     """The request a worker gets for one bag (default: the sample contract, :data:`FAST_CODEC`)."""
     text = contract_text if contract_text is not None else SAMPLE_CONTRACT.read_text()
-    codec = FAST_CODEC if encoder is None else encoder
+    codec = EncoderSettings.from_dict(FAST_CODEC if encoder is None else encoder)
     return EpisodeRequest(
         episode_id=episode_id_for(str(bag), text, codec),
         bag_uri=str(bag),

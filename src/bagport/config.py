@@ -6,10 +6,12 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, PositiveInt, model_validator
 from pydantic.fields import FieldInfo
+
+from bagport.yamlsource import YamlJson
 
 __all__ = ["CliOption", "ConvertConfig", "cli_option"]
 
@@ -39,7 +41,7 @@ def cli_option(name: str, field: FieldInfo) -> CliOption:
     return CliOption(flag=flag, metavar=metavar, named=given.named, group=given.group)
 
 
-def _default_encoder() -> dict[str, Any]:
+def _default_encoder() -> dict[str, YamlJson]:
     from bagport.video.settings import default_encoder  # noqa: PLC0415 - no numpy/av for `bagport --help`
 
     return default_encoder()
@@ -93,7 +95,7 @@ class ConvertConfig(BaseModel):
         description="existing Ray cluster, e.g. ray://10.0.0.5:10001, or 'auto' (the cluster this machine "
         "belongs to)",
     )
-    encoder: Annotated[dict[str, Any], CliOption(named="codec")] = Field(
+    encoder: Annotated[dict[str, YamlJson], CliOption(named="codec")] = Field(
         default_factory=_default_encoder,
         description="encoder preset name in configs/codecs or a YAML file (default: h264-fast; LeRobot's: "
         "lerobot-default)",

@@ -18,28 +18,40 @@ from __future__ import annotations
 
 import posixpath
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, TypedDict
 
 import fsspec
 import pydantic
 import yaml
 from fsspec.core import url_to_fs
+from pydantic import JsonValue
 
 from bagport.errors import ManifestError
 from bagport.manifest_csv import csv_entries
 from bagport.uris import is_local, protocol_of
-from bagport.yamlsource import load_yaml, primary_error
+from bagport.yamlsource import YamlJson, load_yaml, primary_error
 
-__all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
+__all__ = ["BagEntry", "Manifest", "ManifestWindow", "load_manifest", "parse_manifest"]
 
 _GLOB_CHARS = frozenset("*?[")
+
+
+class ManifestWindow(TypedDict, total=False):
+    """An entry's window, only the keys it gives: ``start_s``/``end_s`` (seconds from the bag start) or
+    ``start_ns``/``end_ns`` (ROS time); empty: the whole bag. The keywords of an
+    :class:`bagport.request.EpisodeRequest`'s window."""
+
+    start_s: float
+    end_s: float
+    start_ns: int
+    end_ns: int
 
 
 class _Entry(pydantic.BaseModel):
     model_config = pydantic.ConfigDict(extra="forbid", frozen=True)
     uri: str = pydantic.Field(min_length=1)
     task: str | None = None
-    metadata: dict[str, Any] = pydantic.Field(default_factory=dict)
+    metadata: dict[str, YamlJson] = pydantic.Field(default_factory=dict)
     start_s: float | None = pydantic.Field(default=None, ge=0)
     end_s: float | None = pydantic.Field(default=None, gt=0)
     start_ns: int | None = pydantic.Field(default=None, ge=0)
@@ -56,9 +68,17 @@ class _Entry(pydantic.BaseModel):
                 raise ValueError(f"the window ends ({end}) before it starts ({start})")
         return self
 
-    def window(self) -> dict[str, Any]:
-        fields = ("start_s", "end_s", "start_ns", "end_ns")
-        return {name: getattr(self, name) for name in fields if getattr(self, name) is not None}
+    def window(self) -> ManifestWindow:
+        window = ManifestWindow()
+        if self.start_s is not None:
+            window["start_s"] = self.start_s
+        if self.end_s is not None:
+            window["end_s"] = self.end_s
+        if self.start_ns is not None:
+            window["start_ns"] = self.start_ns
+        if self.end_ns is not None:
+            window["end_ns"] = self.end_ns
+        return window
 
 
 class _Manifest(pydantic.BaseModel):
@@ -73,8 +93,8 @@ class BagEntry:
     uri: str
     entry: int
     task: str | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
-    window: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
+    window: ManifestWindow = field(default_factory=ManifestWindow)
     """``start_s``/``end_s`` (seconds from the bag start) or ``start_ns``/``end_ns`` (ROS time); empty:
     the whole bag (or the episodes the contract finds in it)."""
 
@@ -170,9 +190,17 @@ def _yaml_model(text: str, source: str) -> _Manifest:
             f"line {line}: {where}: {first['msg']}",
             file=source,
             entry=entry,
-            fix="a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries.",
+            fix=_NOT_JSON_FIX
+            if first["type"] == "invalid-json-value"
+            else "a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries.",
         ) from err
     return model
+
+
+_NOT_JSON_FIX = (
+    "metadata values are JSON values: text, numbers, true/false, lists and mappings (dates and times are "
+    "read as text)."
+)
 
 
 def parse_manifest(

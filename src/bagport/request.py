@@ -8,10 +8,14 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, replace
 from typing import Any
 
+from pydantic import JsonValue
+
 from bagport.align import NS_PER_S
+from bagport.qa.config import QAConfig
+from bagport.video.settings import EncoderSettings
 
 __all__ = ["EpisodeOutcome", "EpisodeRequest", "episode_id_for"]
 
@@ -24,11 +28,13 @@ class EpisodeRequest:
     staging_uri: str
     contract_text: str
     contract_name: str
-    encoder: dict[str, Any] = field(default_factory=dict)
+    encoder: EncoderSettings = field(default_factory=EncoderSettings)
+    """The checked encoder settings (``ConvertConfig.encoder``, a preset's keys, is converted when the
+    run is planned)."""
     default_task: str | None = None
-    metadata: dict[str, Any] = field(default_factory=dict)
-    qa: dict[str, Any] = field(default_factory=dict)
-    """QA thresholds (a :class:`bagport.qa.QAConfig` as a dict); empty: the defaults."""
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
+    qa: QAConfig = field(default_factory=QAConfig)
+    """QA thresholds (the defaults unless the run gives a QA file)."""
     start_ns: int | None = None
     end_ns: int | None = None
     """The episode's window in bag log time (inclusive); ``None``: from the bag's start / to its end."""
@@ -43,9 +49,6 @@ class EpisodeRequest:
     """The event's note, e.g. why an operator marked the demonstration failed."""
     msg_definitions: dict[str, str] = field(default_factory=dict)
     """``{type name: .msg text}`` from ``--msg-path``: workers need no access to the folder."""
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
 
     @property
     def has_window(self) -> bool:
@@ -108,8 +111,9 @@ class EpisodeRequest:
 
     @property
     def qa_scoring(self) -> dict[str, Any]:
-        """The QA settings that shape the staged scores (``on_fail`` is applied when the dataset is written)."""
-        return {k: v for k, v in self.qa.items() if k != "on_fail"}
+        """The QA settings that shape the staged scores, as JSON (``on_fail`` is applied when the dataset
+        is written)."""
+        return self.qa.model_dump(mode="json", exclude={"on_fail"})
 
     @property
     def qa_sha256(self) -> str:
@@ -126,14 +130,14 @@ def msg_definitions_sha256(msg_definitions: Mapping[str, str]) -> str:
 def episode_id_for(
     bag_uri: str,
     contract_text: str,
-    encoder: dict[str, Any],
+    encoder: EncoderSettings,
     window: str = "",
     msg_definitions: Mapping[str, str] | None = None,
 ) -> str:
     """Stable id: the same bag (window), contract, encoder settings and ``--msg-path`` definitions
     (they change decoding) give the same staged episode."""
     digest = hashlib.sha256()
-    parts: tuple[str, ...] = (bag_uri, contract_text, repr(sorted(encoder.items())))
+    parts: tuple[str, ...] = (bag_uri, contract_text, encoder.key())
     if window:
         parts += (window,)
     if msg_definitions:

@@ -28,7 +28,7 @@ from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError
 from bagport.formats import check_format_outputs, write_formats
-from bagport.manifest import Manifest, load_manifest, parse_manifest
+from bagport.manifest import Manifest, ManifestWindow, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
 from bagport.segment import kept_segmentation, segment_request, segments_bags
 from bagport.selection import EpisodeFailure, select_episodes
@@ -78,7 +78,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     """
     contract_text = read_text(config.contract, "contract")
     contract = parse_contract(contract_text, config.contract)
-    EncoderSettings.from_dict(config.encoder)
+    encoder = EncoderSettings.from_dict(config.encoder)
     qa = load_qa_config(read_text(config.qa, "qa") if config.qa else None, config.qa or "qa.yaml")
     if config.on_qa_fail is not None:
         qa = qa.model_copy(update={"on_fail": config.on_qa_fail})
@@ -112,12 +112,10 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         )
     check_format_outputs(config)
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
-    # one copy shared by every request (read only): 2,000 copies of the QA settings were 15 MB
-    qa_settings, encoder = qa.model_dump(mode="json"), dict(config.encoder)
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(
-                bag.uri, contract_text, config.encoder, window_key(bag.window), msg_definitions
+                bag.uri, contract_text, encoder, window_key(bag.window), msg_definitions
             ),
             bag_uri=bag.uri,
             manifest_entry=bag.entry,
@@ -127,7 +125,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             encoder=encoder,
             default_task=bag.task,
             metadata=bag.metadata,
-            qa=qa_settings,
+            qa=qa,
             **bag.window,
             msg_definitions=msg_definitions,
         )
@@ -242,7 +240,7 @@ def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -
     )
 
 
-def window_key(window: dict[str, Any]) -> str:
+def window_key(window: ManifestWindow) -> str:
     """A manifest window as the text its request's :meth:`EpisodeRequest.window_key` gives."""
     if not window:
         return ""
@@ -330,7 +328,9 @@ def reduce_run(
         record["write_key"] = write_key(plan, stamped, failures)
     # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
     record["excluded"] = [
-        {**e.brief(), "source_stamp": source_stamp(e.qa.bag_uri)} for e in entries if e.episode_index is None
+        replace(e.brief(), source_stamp=source_stamp(e.qa.bag_uri)).to_json()
+        for e in entries
+        if e.episode_index is None
     ]
     if not kept:  # an append whose new bags were all excluded: recorded, nothing written
         record_exclusions(plan.config.output, record)
@@ -389,7 +389,7 @@ def summary_json(report: DatasetReport) -> str:
             "tasks": list(report.tasks),
             "videos": list(report.video_keys),
             "size_bytes": report.size_bytes,
-            "excluded": list(report.excluded),
+            "excluded": [row.to_json() for row in report.excluded],
             "converted_now": report.converted,
             "reused": len(report.reused),
             "up_to_date": up_to_date(report),

@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
 
 import fsspec
+from pydantic import JsonValue
 
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.qa import EpisodeQA, QAEntry
@@ -28,7 +28,7 @@ class EpisodeFailure:
     segment: int | None = None
     label: str | None = None
     note: str = ""
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
 
     @classmethod
     def of(cls, request: EpisodeRequest, error: str) -> EpisodeFailure:
@@ -48,7 +48,7 @@ class _Episode:
     segment: int | None
     label: str | None
     note: str
-    metadata: dict[str, Any]
+    metadata: dict[str, JsonValue]
 
 
 def _read_qa(summary: EpisodeSummary) -> EpisodeQA:

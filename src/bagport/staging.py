@@ -21,6 +21,7 @@ from typing import Any
 
 import fsspec
 from fsspec.core import url_to_fs
+from pydantic import JsonValue
 
 from bagport.errors import TransientError
 
@@ -71,7 +72,7 @@ class EpisodeSummary:
     features: tuple[StagedFeature, ...]
     stamp_sources: dict[str, str]
     videos: dict[str, str]
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
     bagport_version: str = ""
     contract_sha256: str = ""
     source_stamp: str = ""

@@ -7,10 +7,11 @@ error can point at the exact place in the user's file.
 
 from __future__ import annotations
 
+import datetime
 import difflib
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Annotated, Any
 
 import pydantic
 import yaml
@@ -18,6 +19,7 @@ from pydantic_core import ErrorDetails
 
 __all__ = [
     "ValidationProblem",
+    "YamlJson",
     "YamlSource",
     "explain_validation",
     "load_plain",
@@ -28,6 +30,22 @@ __all__ = [
 _LOADER: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 """libyaml's safe loader where PyYAML was built with it (about 10x faster: a tiny episode parsed
 its bag's metadata.yaml and its contract for a fifth of its time), else the pure-Python one."""
+
+
+def _dates_as_text(value: Any) -> Any:
+    """YAML's dates and times (``2026-11-02``) as the text ``str()`` gives, in lists and mappings too."""
+    if isinstance(value, datetime.date | datetime.time):
+        return str(value)
+    if isinstance(value, list):
+        return [_dates_as_text(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _dates_as_text(v) for k, v in value.items()}
+    return value
+
+
+YamlJson = Annotated[pydantic.JsonValue, pydantic.BeforeValidator(_dates_as_text)]
+"""Free-form YAML a user writes (manifest metadata, a contract's ``qos``): JSON values, with YAML's
+unquoted dates and times read as text."""
 
 
 @dataclass(frozen=True, slots=True)

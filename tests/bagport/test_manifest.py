@@ -69,12 +69,25 @@ def test_fsspec_uris(tmp_path: Path) -> None:
         pytest.param(
             "bags:\n  - {uri: a.mcap, end_s: -1}\n", r"end_s: Input should be greater than 0", id="negative"
         ),
+        pytest.param(
+            "bags:\n  - uri: a.mcap\n    metadata: {robot_id: arm-1, raw: !!binary aGk=}\n",
+            r"bags\[0\].*line 3: bags\.0\.metadata\.raw: .*not a valid JSON value.*Fix: .*JSON values",
+            id="metadata-not-json",
+        ),
     ],
 )
 def test_manifest_errors_name_the_entry(tmp_path: Path, text: str, match: str) -> None:
     _touch(tmp_path / "a.mcap")
     with pytest.raises(ManifestError, match=match):
         parse_manifest(text, "m.yaml", base_dir=str(tmp_path))
+
+
+def test_metadata_dates_are_read_as_text(tmp_path: Path) -> None:
+    """YAML reads an unquoted ``2026-11-02`` as a date: metadata holds JSON values, so it is kept as text."""
+    _touch(tmp_path / "a.mcap")
+    text = "bags:\n  - uri: a.mcap\n    metadata: {day: 2026-11-02, at: [2026-11-02 10:30:00], n: 3}\n"
+    bag = parse_manifest(text, "m.yaml", base_dir=str(tmp_path)).bags[0]
+    assert bag.metadata == {"day": "2026-11-02", "at": ["2026-11-02 10:30:00"], "n": 3}
 
 
 def test_duplicate_bag_is_an_error(tmp_path: Path) -> None:

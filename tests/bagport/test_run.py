@@ -53,8 +53,8 @@ def test_failing_episode_is_excluded_and_listed_with_its_reason(fleet: Path, tmp
     config, staged = _run(fleet, out)
     report = reduce_run(plan_run(config), staged)
     assert report.episodes == 2
-    assert [row["bag_uri"].rsplit("/", 1)[-1] for row in report.excluded] == ["nan"]
-    assert "values.non_finite observation.state" in report.excluded[0]["reason"]
+    assert [row.bag_uri.rsplit("/", 1)[-1] for row in report.excluded] == ["nan"]
+    assert "values.non_finite observation.state" in report.excluded[0].reason
     summary = json.loads((out / "meta/qa/summary.json").read_text())
     assert [(e["episode_index"], e["verdict"]) for e in summary["episodes"]] == [
         (0, "pass"),
@@ -104,7 +104,7 @@ def test_a_bag_that_failed_to_convert_is_excluded_with_its_error(fleet: Path, tm
     config, staged = _run(fleet, out)
     failure = EpisodeFailure(str(fleet / "gone"), 3, "gone: bag does not exist")
     report = reduce_run(plan_run(config), staged, [failure])
-    assert [r["reason"] for r in report.excluded][-1] == "conversion failed: gone: bag does not exist"
+    assert [r.reason for r in report.excluded][-1] == "conversion failed: gone: bag does not exist"
 
 
 def test_nothing_left_is_an_error_that_says_how_to_fix_it(fleet: Path, tmp_path: Path) -> None:

@@ -194,7 +194,7 @@ def test_reused_episodes_take_the_current_manifests_entry_order_and_metadata(
     ]
     meta = pd.concat([pd.read_parquet(p) for p in sorted((tmp_path / "b").glob("meta/episodes/*/*.parquet"))])
     assert [list(t) for t in meta["tasks"]] == [["task of bag 007"], ["task of bag 004"], ["task of bag 005"]]
-    assert [e["manifest_entry"] for e in report.qa] == [0, 1, 2]
+    assert [e.manifest_entry for e in report.qa] == [0, 1, 2]
     # the rows of episode 1 are bag 004's, as episode 0 of the first dataset
     data_a = pd.read_parquet(next((tmp_path / "a").glob("data/*/*.parquet")))
     data_b = pd.concat([pd.read_parquet(p) for p in sorted((tmp_path / "b").glob("data/*/*.parquet"))])
@@ -216,11 +216,9 @@ def test_small_episodes_share_a_task_run_and_each_bag_fails_alone(
     assert BATCHES == [2, 2]
     assert submitted == ["bag_004", "broken.mcap", "bag_005", "bag_007"]
     assert report.episodes == 3
-    assert [(row["manifest_entry"], Path(row["bag_uri"]).name) for row in report.excluded] == [
-        (1, "broken.mcap")
-    ]
-    assert "broken.mcap" in report.excluded[0]["reason"]
-    assert "conversion failed" in report.excluded[0]["reason"]
+    assert [(row.manifest_entry, Path(row.bag_uri).name) for row in report.excluded] == [(1, "broken.mcap")]
+    assert "broken.mcap" in report.excluded[0].reason
+    assert "conversion failed" in report.excluded[0].reason
     episodes = _record(tmp_path / "ds")["episodes"]
     assert [Path(e["bag_uri"]).name for e in episodes] == ["bag_004", "bag_005", "bag_007"]
 

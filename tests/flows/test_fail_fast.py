@@ -97,10 +97,10 @@ def test_by_default_a_bad_bag_is_reported_and_the_others_are_converted(
     out = tmp_path / "ds"
     report = run_config(_config(fleet, out))
     assert report.episodes == 3
-    assert [(row["manifest_entry"], row["bag_uri"].rsplit("/", 1)[-1]) for row in report.excluded] == [
+    assert [(row.manifest_entry, row.bag_uri.rsplit("/", 1)[-1]) for row in report.excluded] == [
         (0, "broken.mcap")
     ]
-    assert "conversion failed" in report.excluded[0]["reason"]
+    assert "conversion failed" in report.excluded[0].reason
     assert len(_staged(out)) == 3
 
 

@@ -9,7 +9,7 @@ has works unchanged.  Live-only sections are accepted and ignored offline.
 from __future__ import annotations
 
 import re
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import (
     AfterValidator,
@@ -23,6 +23,7 @@ from pydantic import (
 )
 
 from bagport.msgtypes import normalize_msgtype
+from bagport.yamlsource import YamlJson
 
 __all__ = [
     "ActionEntry",
@@ -149,13 +150,13 @@ class ObservationEntry(_Strict):
     dtype: str | None = None
     decoder: DecoderRef | None = None
     image: ImageOptions | None = None
-    qos: dict[str, Any] | None = None
+    qos: dict[str, YamlJson] | None = None
 
 
 class Publish(_Strict):
     topic: Topic
     type: MsgType
-    qos: dict[str, Any] | None = None
+    qos: dict[str, YamlJson] | None = None
 
 
 class ActionEntry(_Strict):
@@ -173,7 +174,7 @@ class TaskEntry(_Strict):
     key: str = "task"
     topic: Topic
     type: MsgType = "std_msgs/msg/String"
-    qos: dict[str, Any] | None = None
+    qos: dict[str, YamlJson] | None = None
 
 
 class ScalarEntry(_Strict):
@@ -186,7 +187,7 @@ class ScalarEntry(_Strict):
     selector: Selector | None = None
     align: AlignOptions | None = None
     decoder: DecoderRef | None = None
-    qos: dict[str, Any] | None = None
+    qos: dict[str, YamlJson] | None = None
 
 
 class EpisodeEvents(_Strict):
@@ -238,12 +239,12 @@ class Contract(_Strict):
     rewards: tuple[ScalarEntry, ...] = ()
     signals: tuple[ScalarEntry, ...] = ()
     complementary_data: tuple[ScalarEntry, ...] = ()
-    adjunct: Any = None
-    teleop: Any = None
-    reset: Any = None
-    visualization: Any = None
-    recording: Any = None
-    info: Any = None
+    adjunct: YamlJson = None
+    teleop: YamlJson = None
+    reset: YamlJson = None
+    visualization: YamlJson = None
+    recording: YamlJson = None
+    info: YamlJson = None
     timestamp_source: StampSource | None = None
     max_duration_s: PositiveFloat | None = None
     clock: str | None = None

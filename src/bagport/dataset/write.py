@@ -26,7 +26,7 @@ from bagport.dataset.replace import publish_built, refuse_existing
 from bagport.dataset.sketches import DatasetSketches
 from bagport.dataset.videos import write_video_files
 from bagport.errors import DatasetWriteError
-from bagport.qa import QAEntry
+from bagport.qa import QABrief, QAEntry
 from bagport.scratch import scratch_folder
 from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
 from bagport.uris import is_local
@@ -43,9 +43,9 @@ class DatasetReport:
     video_keys: tuple[str, ...]
     size_bytes: int
     duration_s: float
-    excluded: tuple[dict[str, Any], ...] = ()
+    excluded: tuple[QABrief, ...] = ()
     """Bags left out (QA failure or conversion error), with the reason."""
-    qa: tuple[dict[str, Any], ...] = ()
+    qa: tuple[QABrief, ...] = ()
     """Every bag's QA brief: episode index (None when excluded), score, verdict, reason."""
     qa_report: str | None = None
     """The HTML QA report in the dataset (``meta/qa/report.html``: every run, rebuilt by each one)."""

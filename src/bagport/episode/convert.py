@@ -76,7 +76,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     and time of any problem; on error nothing is left in the staging store.
     """
     plan = parse_contract(request.contract_text, request.contract_name)
-    settings = EncoderSettings.from_dict(request.encoder)
+    settings = request.encoder
     stamp = source_stamp(request.bag_uri)
     reusable = _reusable(request, stamp)
     if reusable is not None:
@@ -93,7 +93,7 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
         workdir = scratch_dir("episode")
         try:
             episode = _Episode(
-                request, plan, settings, QAConfig.model_validate(request.qa),
+                request, plan, settings, request.qa,
                 stamp, prepared, frame_tasks, task_source, keys, find_reusable_clips(request, keys), workdir,
             )  # fmt: skip
             summary = _stage(episode)

@@ -81,7 +81,7 @@ def clip_keys(
             continue
         digest = hashlib.sha256()
         settings = json.dumps(
-            [request.encoder, request.qa_scoring, msg_definitions_sha256(request.msg_definitions)],
+            [request.encoder.key(), request.qa_scoring, msg_definitions_sha256(request.msg_definitions)],
             sort_keys=True,
             default=str,
         )

@@ -22,7 +22,7 @@ from bagport.episode.quality import assess_episode, bag_checks
 from bagport.episode.tasks import resolve_tasks
 from bagport.errors import BagportError, ManifestError
 from bagport.manifest import load_manifest
-from bagport.qa import EpisodeQA, QAConfig, QAEntry, ValueMonitor, load_qa_config
+from bagport.qa import EpisodeQA, QAEntry, ValueMonitor, load_qa_config
 from bagport.request import EpisodeRequest
 from bagport.segment import EXCLUDED_LABELS, label_reason, segment_request, segments_bags
 from bagport.uris import read_text
@@ -34,7 +34,7 @@ def score_bag(request: EpisodeRequest) -> EpisodeQA:
     """QA of one episode (a bag, or its window); one that cannot be read or aligned gets a failing
     record with the reason. The steps of a conversion, with the value monitor as the only sink."""
     plan = parse_contract(request.contract_text, request.contract_name)
-    config = QAConfig.model_validate(request.qa)
+    config = request.qa
     uri = request.bag_uri
     try:
         with open_bag(uri, msg_definitions=request.msg_definitions) as whole:
@@ -118,7 +118,7 @@ def score_manifest(
             contract_name=contract_uri,
             default_task=bag.task,
             metadata=bag.metadata,
-            qa=qa.model_dump(mode="json"),
+            qa=qa,
             msg_definitions=dict(msg_definitions or {}),
             **bag.window,
         )

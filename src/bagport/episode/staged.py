@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import Any
 
 from fsspec.core import url_to_fs
+from pydantic import JsonValue
 
 from bagport import __version__
 from bagport.errors import DatasetWriteError
@@ -39,7 +40,7 @@ class PlannedEpisode:
     dir_uri: str
     bag_uri: str
     manifest_entry: int
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
     segment: int | None = None
     label: str | None = None
     note: str = ""

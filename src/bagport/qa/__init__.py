@@ -7,7 +7,7 @@ or ``bagport qa`` without converting) lives in :mod:`bagport.episode.quality`.
 from __future__ import annotations
 
 from bagport.qa.config import Gate, QAConfig, load_qa_config
-from bagport.qa.result import CheckResult, EpisodeQA, QAEntry, Verdict, judge, score_checks
+from bagport.qa.result import CheckResult, EpisodeQA, QABrief, QAEntry, Verdict, judge, score_checks
 from bagport.qa.streams import StreamStamps, stream_checks
 from bagport.qa.sync import AlignedStamps, alignment_checks, sync_checks
 from bagport.qa.values import ValueMonitor
@@ -17,6 +17,7 @@ __all__ = [
     "CheckResult",
     "EpisodeQA",
     "Gate",
+    "QABrief",
     "QAConfig",
     "QAEntry",
     "StreamStamps",

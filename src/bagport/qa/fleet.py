@@ -78,7 +78,7 @@ def index_table(entries: Sequence[QAEntry], run: int, robot_type: str) -> pa.Tab
     """This run's rows of the index; ``detail`` is true for warned and failed episodes."""
     rows: dict[str, list[Any]] = {name: [] for name in INDEX_SCHEMA.names}
     for position, entry in enumerate(entries):
-        brief = entry.brief()
+        brief = entry.brief().to_json()
         values = {
             **{k: brief[k] for k in brief if k in rows},
             "run": run,

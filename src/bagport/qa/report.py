@@ -87,7 +87,7 @@ def render_episode_page(entry: QAEntry, names: Names | None, fps: int | None, ba
         "<!DOCTYPE html><html><head><meta charset='utf-8'>"
         f"<title>QA {escape(entry.name)}</title><style>{CSS}</style></head><body>"
         f'<p><a href="{escape(back_href)}">&larr; QA report</a></p><h1>{_title(entry)}</h1>'
-        f'<p class="small">{index}; {escape(entry.brief()["reason"])}</p>'
+        f'<p class="small">{index}; {escape(entry.reason)}</p>'
         f"{render_episode(entry, names, fps)}</body></html>"
     )
 
@@ -100,12 +100,11 @@ def render_report(entries: Sequence[QAEntry], dataset: dict[str, Any], names: Na
     )
     rows = []
     for n, entry in enumerate(entries):
-        brief = entry.brief()
         index = "excluded" if entry.episode_index is None else str(entry.episode_index)
         rows.append(
             f'<tr><td><a href="#ep{n}">{escape(entry.name)}</a></td>'
             f'<td>{index}</td><td>{entry.qa.score:.2f}</td><td class="{entry.qa.verdict}">{entry.qa.verdict}</td>'
-            f"<td>{escape(brief['reason'])}</td></tr>"
+            f"<td>{escape(entry.reason)}</td></tr>"
         )
     sections = [
         f'<details id="ep{n}"{" open" if entry.qa.verdict != "pass" else ""}><summary>{_title(entry)}</summary>'

@@ -5,9 +5,20 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
+from pydantic import JsonValue
+
 from bagport.qa.config import Gate
 
-__all__ = ["SCORE_BANDS", "CheckResult", "EpisodeQA", "QAEntry", "Verdict", "judge", "score_checks"]
+__all__ = [
+    "SCORE_BANDS",
+    "CheckResult",
+    "EpisodeQA",
+    "QABrief",
+    "QAEntry",
+    "Verdict",
+    "judge",
+    "score_checks",
+]
 
 Verdict = Literal["pass", "warn", "fail"]
 
@@ -123,6 +134,11 @@ class EpisodeQA:
         return cls(**{**data, "checks": checks})
 
 
+def _episode_name(bag_uri: str, segment: int | None) -> str:
+    stem = bag_uri.rstrip("/").rsplit("/", 1)[-1]
+    return stem if segment is None else f"{stem}#{segment}"
+
+
 @dataclass(frozen=True, slots=True)
 class QAEntry:
     """One bag of the run: its QA, and where it ended up."""
@@ -139,34 +155,78 @@ class QAEntry:
     note: str = ""
     by_label: bool = False
     """Left out because of its label (failed / discarded), not by QA."""
-    metadata: dict[str, Any] = field(default_factory=dict)
+    metadata: dict[str, JsonValue] = field(default_factory=dict)
     """The episode's metadata: its manifest entry's columns (``robot_id``...) and the recorder's
     ``episode_id`` from episode events."""
 
     @property
     def name(self) -> str:
         """The bag's file name, with ``#<segment>`` for one of several episodes in a bag."""
-        stem = self.qa.bag_uri.rstrip("/").rsplit("/", 1)[-1]
-        return stem if self.segment is None else f"{stem}#{self.segment}"
+        return _episode_name(self.qa.bag_uri, self.segment)
 
-    def brief(self) -> dict[str, Any]:
+    @property
+    def reason(self) -> str:
+        """Why it was left out, or the QA headline."""
+        return self.excluded_reason or self.qa.headline()
+
+    def brief(self) -> QABrief:
         clips = self.qa.plots.get("fidelity", {}).values()
         psnrs = [c["psnr_min_db"] for c in clips if c.get("psnr_min_db") is not None]
-        return {
-            "bag_uri": self.qa.bag_uri,
-            "manifest_entry": self.manifest_entry,
-            "episode_index": self.episode_index,
-            "score": self.qa.score,
-            "verdict": self.qa.verdict,
-            "excluded": self.episode_index is None,
-            "reason": self.excluded_reason or self.qa.headline(),
-            "duration_s": round(self.qa.duration_s, 3),
-            "frames": self.qa.frames,
-            "video_psnr_min_db": min(psnrs) if psnrs else None,
-            "video_damaged_frames": sum(int(c.get("damaged_frames", 0)) for c in clips) if clips else None,
-            "segment": self.segment,
-            "label": self.label,
-            "note": self.note,
-            "excluded_by_label": self.by_label,
-            "metadata": self.metadata,
-        }
+        return QABrief(
+            bag_uri=self.qa.bag_uri,
+            manifest_entry=self.manifest_entry,
+            episode_index=self.episode_index,
+            score=self.qa.score,
+            verdict=self.qa.verdict,
+            excluded=self.episode_index is None,
+            reason=self.reason,
+            duration_s=round(self.qa.duration_s, 3),
+            frames=self.qa.frames,
+            video_psnr_min_db=min(psnrs) if psnrs else None,
+            video_damaged_frames=sum(int(c.get("damaged_frames", 0)) for c in clips) if clips else None,
+            segment=self.segment,
+            label=self.label,
+            note=self.note,
+            excluded_by_label=self.by_label,
+            metadata=self.metadata,
+        )
+
+
+@dataclass(frozen=True, slots=True)
+class QABrief:
+    """One episode's QA in one row: where it went, its score and verdict, video fidelity, and why. What a
+    run reports (:class:`bagport.dataset.DatasetReport`), small and typed; :meth:`to_json` is its JSON
+    form (the run summary, the run record, the QA index)."""
+
+    bag_uri: str
+    manifest_entry: int
+    episode_index: int | None
+    """Index in the dataset; ``None`` when the episode was excluded or failed to convert."""
+    score: float
+    verdict: Verdict
+    excluded: bool
+    reason: str
+    duration_s: float
+    frames: int
+    video_psnr_min_db: float | None
+    video_damaged_frames: int | None
+    segment: int | None
+    label: str | None
+    note: str
+    excluded_by_label: bool
+    metadata: dict[str, JsonValue]
+    """The manifest entry's columns and the recorder's ``episode_id`` (user data, as in the manifest)."""
+    source_stamp: str | None = None
+    """The bag's :func:`bagport.bags.source_stamp` when it was left out (kept in the run record, so an
+    unchanged bad bag is not retried); ``None``: not recorded (and absent from the JSON)."""
+
+    @property
+    def name(self) -> str:
+        """The bag's file name, with ``#<segment>`` for one of several episodes in a bag."""
+        return _episode_name(self.bag_uri, self.segment)
+
+    def to_json(self) -> dict[str, Any]:
+        row = asdict(self)
+        if self.source_stamp is None:
+            del row["source_stamp"]
+        return row

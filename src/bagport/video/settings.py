@@ -3,8 +3,9 @@ preset=12); a conversion's default is :data:`DEFAULT_ENCODER` (H.264), chosen on
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
-from dataclasses import dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 from bagport.errors import VideoError
@@ -66,6 +67,10 @@ class EncoderSettings:
         if settings.g is not None and settings.g < 1:
             raise VideoError(f"encoder setting g={settings.g} must be >= 1")
         return settings
+
+    def key(self) -> str:
+        """The settings as canonical text (for the ids and keys of what they encode)."""
+        return json.dumps(asdict(self), sort_keys=True)
 
     def codec_options(self) -> dict[str, str]:
         """Options for ``av`` ``add_stream``, the way LeRobot 0.6 builds them."""

@@ -24,7 +24,7 @@ from bagport.bags.remote import RemoteBag, RemotePath
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.errors import TransientError
 from bagport.synth import EpisodeSpec, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
 from tests.s3 import moto_s3
 
 NS = 1_000_000_000
@@ -195,13 +195,13 @@ def test_episode_from_s3_records_how_the_bag_was_read(s3: s3fs.S3FileSystem, tmp
     summaries = []
     for bag in (str(local), uri):
         request = EpisodeRequest(
-            episode_id=episode_id_for(bag, text, FAST_CODEC),
+            episode_id=episode_id_for(bag, text, FAST_SETTINGS),
             bag_uri=bag,
             manifest_entry=0,
             staging_uri=str(tmp_path / "staging"),
             contract_text=text,
             contract_name="contract.yaml",
-            encoder=FAST_CODEC,
+            encoder=FAST_SETTINGS,
         )
         summaries.append(convert_episode(request))
     here, remote = summaries

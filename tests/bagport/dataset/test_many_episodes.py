@@ -18,9 +18,10 @@ from bagport.dataset import write_dataset
 from bagport.dataset.invariants import check_invariants
 from bagport.dataset.validate import video_backend
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
+from bagport.qa import QAConfig
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import FAST_CODEC
+from tests.helpers import FAST_SETTINGS
 
 pytestmark = pytest.mark.slow
 
@@ -68,8 +69,8 @@ def many(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, list[EpisodeSu
         )
         write_episode_bag(bag, "mcap", spec)
         request = EpisodeRequest(
-            episode_id_for(str(bag), CONTRACT, FAST_CODEC), str(bag), i, str(root / "staging"), CONTRACT,
-            "tiny.yaml", FAST_CODEC, qa={"video": {"fidelity": False}},
+            episode_id_for(str(bag), CONTRACT, FAST_SETTINGS), str(bag), i, str(root / "staging"), CONTRACT,
+            "tiny.yaml", FAST_SETTINGS, qa=QAConfig.model_validate({"video": {"fidelity": False}}),
         )  # fmt: skip
         staged.append(convert_episode(request))
     assert len({s.frames for s in staged}) >= 4, [s.frames for s in staged]  # episodes of unequal length

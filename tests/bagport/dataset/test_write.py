@@ -18,7 +18,7 @@ from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.errors import DatasetWriteError, ValidationError
 from bagport.staging import EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
 
 
 @pytest.fixture(scope="module")
@@ -30,13 +30,13 @@ def staged(tmp_path_factory: pytest.TempPathFactory) -> list[EpisodeSummary]:
         bag = root / f"ep{i}"
         write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.4 + 0.1 * i, seed=i, task=f"task {i % 2}"))
         request = EpisodeRequest(
-            episode_id=episode_id_for(str(bag), text, FAST_CODEC),
+            episode_id=episode_id_for(str(bag), text, FAST_SETTINGS),
             bag_uri=str(bag),
             manifest_entry=i,
             staging_uri=str(root / "staging"),
             contract_text=text,
             contract_name="sample_robot.yaml",
-            encoder=FAST_CODEC,
+            encoder=FAST_SETTINGS,
         )
         summaries.append(convert_episode(request))
     return summaries
@@ -93,13 +93,13 @@ def test_inconsistent_features_are_refused(tmp_path: Path, staged: list[EpisodeS
     text = SAMPLE_CONTRACT.read_text()
     odd = convert_episode(
         EpisodeRequest(
-            episode_id_for(str(other), text, FAST_CODEC),
+            episode_id_for(str(other), text, FAST_SETTINGS),
             str(other),
             9,
             str(tmp_path / "st"),
             text,
             "c",
-            FAST_CODEC,
+            FAST_SETTINGS,
         )
     )
     with pytest.raises(

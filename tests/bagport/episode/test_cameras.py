@@ -28,11 +28,14 @@ from bagport.staging import QA_FILE, EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, render_frame, write_episode_bag
 from bagport.synth.images import depth_frame, recorded_depth
 from bagport.video.depth import DepthQuantizer
+from bagport.video.settings import EncoderSettings
 
 NS = 1_000_000_000
 FPS = 30
 H, W = 48, 64
-LOSSLESS_ISH = {"codec": "libx264", "pix_fmt": "yuv444p", "crf": 0, "preset": "ultrafast", "g": 2}
+LOSSLESS_ISH = EncoderSettings.from_dict(
+    {"codec": "libx264", "pix_fmt": "yuv444p", "crf": 0, "preset": "ultrafast", "g": 2}
+)
 COLOUR = ["rgb8", "bgr8", "rgba8", "bgra8", "mono8", "8UC1", "8UC3", "mono16"]
 BAYER = ["bayer_rggb8", "bayer_bggr8", "bayer_gbrg8", "bayer_grbg8"]
 DEPTH = [("raw", "16UC1"), ("raw", "32FC1"), ("compressed_depth", "16UC1"), ("compressed_depth", "32FC1")]

@@ -24,7 +24,7 @@ from bagport.synth import (
     decode_frame_index,
     write_episode_bag,
 )
-from tests.helpers import FAST_CODEC
+from tests.helpers import FAST_SETTINGS
 
 pytestmark = pytest.mark.slow
 
@@ -91,13 +91,13 @@ def converted(tmp_path_factory: pytest.TempPathFactory) -> tuple[GroundTruth, Ep
     truth = write_episode_bag(root / "ep", "mcap", SPEC)
     summary = convert_episode(
         EpisodeRequest(
-            episode_id_for(str(root / "ep"), CONTRACT, FAST_CODEC),
+            episode_id_for(str(root / "ep"), CONTRACT, FAST_SETTINGS),
             str(root / "ep"),
             0,
             str(root / "staging"),
             CONTRACT,
             "c.yaml",
-            FAST_CODEC,
+            FAST_SETTINGS,
             "t",
         )
     )

@@ -14,7 +14,7 @@ from bagport.episode import EpisodeRequest, convert_episode
 from bagport.episode.score import score_bag
 from bagport.qa import CheckResult, EpisodeQA, QAConfig
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, Window, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
 
 SMALL_CAMERAS = (
     CameraSpec("front", "raw", "bgr8", height=48, width=64),
@@ -37,9 +37,9 @@ def _request(
         staging_uri=str(tmp_path / "staging"),
         contract_text=contract or SAMPLE_CONTRACT.read_text(),
         contract_name="sample_robot.yaml",
-        encoder=FAST_CODEC,
+        encoder=FAST_SETTINGS,
         default_task=task,
-        qa=(qa or QAConfig()).model_dump(mode="json"),
+        qa=qa or QAConfig(),
     )
 
 

@@ -20,7 +20,7 @@ from bagport.episode import EpisodeRequest, convert_episode
 from bagport.qa import EpisodeQA, QAEntry
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, Window, write_episode_bag
 from bagport.synth.qa_entries import synth_qa_entries
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
 
 pytestmark = pytest.mark.slow
 
@@ -46,7 +46,7 @@ def _converted(tmp_path: Path) -> list[QAEntry]:
         )
         request = EpisodeRequest(
             episode_id=f"ep{index}", bag_uri=str(bag), manifest_entry=index, staging_uri=str(tmp_path / "staging"),
-            contract_text=SAMPLE_CONTRACT.read_text(), contract_name="sample_robot.yaml", encoder=FAST_CODEC,
+            contract_text=SAMPLE_CONTRACT.read_text(), contract_name="sample_robot.yaml", encoder=FAST_SETTINGS,
         )  # fmt: skip
         summary = convert_episode(request)
         qa = EpisodeQA.from_dict(json.loads((Path(summary.dir_uri) / "qa.json").read_text()))

@@ -16,7 +16,7 @@ from bagport.episode import EpisodeRequest, convert_episode
 from bagport.qa import EpisodeQA, QAConfig, QAEntry
 from bagport.qa.report import render_report
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, Window, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
 
 CAMERAS = (
     CameraSpec("front", "raw", "bgr8", height=48, width=64),
@@ -39,11 +39,11 @@ def _entries(tmp_path: Path) -> list[QAEntry]:
             staging_uri=str(tmp_path / "staging"),
             contract_text=SAMPLE_CONTRACT.read_text(),
             contract_name="sample_robot.yaml",
-            encoder=FAST_CODEC,
+            encoder=FAST_SETTINGS,
             # the second episode asks for a PSNR no lossy clip reaches, so its worst frame is shown
             qa=QAConfig.model_validate(
                 {"video": {"psnr_min_db": {"warn": 99.0, "fail": None}, "sample_every": 1}} if index else {}
-            ).model_dump(mode="json"),
+            ),
         )
         summary = convert_episode(request)
         qa = EpisodeQA.from_dict(json.loads((Path(summary.dir_uri) / "qa.json").read_text()))

@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from hypothesis import given
 from hypothesis import strategies as st
 
-from bagport.qa import CheckResult, Verdict, score_checks
+from bagport.qa import CheckResult, EpisodeQA, QAEntry, Verdict, score_checks
 
 
 def _checks(verdicts: list[Verdict]) -> list[CheckResult]:
@@ -36,3 +38,20 @@ def test_a_nan_joint_failure_scores_below_a_warned_episode() -> None:
     assert failed[0] < 0.4
     assert 0.5 <= warned[0] < 0.9
     assert score_checks(_checks(passes * 3)) == (1.0, "pass")
+
+
+def test_a_brief_is_one_typed_row_whose_json_is_the_summary_shape() -> None:
+    """``QAEntry.brief`` gives a :class:`QABrief`; its JSON has the run summary's keys in their order,
+    ``source_stamp`` only once the run record sets it."""
+    qa = EpisodeQA.failed("s3://fleet/day1/ep_7.mcap", "gone: bag does not exist")
+    entry = QAEntry(qa, 3, None, "conversion failed: gone", segment=2, metadata={"robot_id": "arm-1"})
+    brief = entry.brief()
+    assert (brief.name, brief.excluded, brief.reason) == ("ep_7.mcap#2", True, "conversion failed: gone")
+    assert list(brief.to_json()) == [
+        "bag_uri", "manifest_entry", "episode_index", "score", "verdict", "excluded", "reason", "duration_s",
+        "frames", "video_psnr_min_db", "video_damaged_frames", "segment", "label", "note", "excluded_by_label",
+        "metadata",
+    ]  # fmt: skip
+    stamped = replace(brief, source_stamp="size:1").to_json()
+    assert list(stamped)[-1] == "source_stamp"
+    assert stamped["metadata"] == {"robot_id": "arm-1"}

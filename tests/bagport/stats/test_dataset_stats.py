@@ -19,11 +19,14 @@ from bagport.dataset.validate import video_backend
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.stats import QUANTILES, rank_error
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from bagport.video.settings import EncoderSettings
 from tests.helpers import SAMPLE_CONTRACT
 
 pytestmark = pytest.mark.slow
 
-LOSSLESS_RGB = {"codec": "libx264rgb", "pix_fmt": "rgb24", "crf": 0, "g": 2, "preset": "ultrafast"}
+LOSSLESS_RGB = EncoderSettings.from_dict(
+    {"codec": "libx264rgb", "pix_fmt": "rgb24", "crf": 0, "g": 2, "preset": "ultrafast"}
+)
 """Decoded frames equal the frames the stats were computed from, so they compare to float precision."""
 CAMERAS = (
     CameraSpec("front", "raw", "bgr8", height=32, width=48, noise=12.0),

@@ -188,12 +188,6 @@ def _stat_columns(stats: dict[str, FeatureStats], keys: Sequence[str]) -> dict[s
 _LABEL_COLUMNS = ("label", "label_note")
 
 
-def _has_label_columns(root: Path) -> bool:
-    """Whether the dataset's existing episode files carry the label columns (older ones do not)."""
-    existing = sorted((root / "meta" / "episodes").glob("chunk-*/file-*.parquet"))
-    return not existing or all(name in pq.read_schema(existing[0]).names for name in _LABEL_COLUMNS)
-
-
 def write_meta(
     root: Path,
     summaries: Sequence[EpisodeSummary],
@@ -245,7 +239,7 @@ def write_meta(
         table = table.set_column(
             table.schema.get_field_index(name), name, table.column(name).cast(pa.string())
         )
-    if base is not None and not _has_label_columns(root):
+    if base is not None and not base.label_columns:
         table = table.drop_columns(list(_LABEL_COLUMNS))  # LeRobot loads episode files of one schema only
     write_episode_files(
         root,

@@ -200,7 +200,10 @@ def commit_write(
             publish_staged(scratch, session.output, session.staged, placed.digests, append=base is not None)
         return report
     build = Path(session.build)
-    reached("local.publish.files" if base is None else "local.append.files")
+    if base is None:
+        reached("local.publish.files")
+    else:
+        reached("local.append.files")
     report = _build_meta(build, session, summaries, placed, base, robot_type, extras)
     size = placed.size_bytes + _meta_size(build)
     if base is None:

@@ -28,7 +28,7 @@ from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError
 from bagport.formats import check_format_outputs, write_formats
 from bagport.manifest import Manifest, load_manifest, parse_manifest
-from bagport.qa import QAConfig, load_qa_config
+from bagport.qa import QAConfig, QAEntry, load_qa_config
 from bagport.segment import kept_segmentation, segment_request, segments_bags
 from bagport.selection import EpisodeFailure, select_episodes
 from bagport.staging import EpisodeSummary, read_summary
@@ -38,11 +38,14 @@ from bagport.video import EncoderSettings
 __all__ = [
     "EpisodeFailure",
     "PlannedEpisode",
+    "ReduceStart",
     "RunPlan",
+    "commit_reduce",
     "plan_run",
     "reduce_run",
     "segment_all",
     "stage_all",
+    "start_reduce",
 ]
 
 
@@ -217,12 +220,24 @@ def _episode_name(bag_uri: str, segment: int | None) -> str:
     return bag_uri if segment is None else f"{bag_uri}#{segment}"
 
 
-def reduce_run(
+@dataclass(frozen=True, slots=True)
+class ReduceStart:
+    """What the reduce writes: the kept episodes (with what the plan decides about each), every bag's QA
+    entry, the run record and the size limits; small and serialisable (it travels to the commit task)."""
+
+    kept: tuple[EpisodeSummary, ...]
+    entries: tuple[QAEntry, ...]
+    record: dict[str, Any]
+    limits: DatasetLimits
+
+
+def start_reduce(
     plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
-) -> DatasetReport:
+) -> ReduceStart | DatasetReport:
     """Read the staged summaries, put on each what the current plan decides about it (manifest entry,
-    metadata, label: never the staged record's, which may come from another manifest), apply the QA
-    policy, and write the dataset in manifest order."""
+    metadata, label: never the staged record's, which may come from another manifest) and apply the QA
+    policy. When no episode is kept (an append whose new bags were all excluded), the exclusions are
+    recorded and the dataset's report returned: nothing else is written."""
     summaries: list[EpisodeSummary] = []
     for episode in staged:
         summary = read_summary(episode.dir_uri)
@@ -254,31 +269,57 @@ def reduce_run(
         record_exclusions(plan.config.output, record)
         excluded = tuple(e.brief() for e in entries)
         return replace(dataset_report(plan.config.output), excluded=excluded, qa=excluded)
+    return ReduceStart(tuple(kept), tuple(entries), record, limits)
+
+
+def commit_reduce(
+    plan: RunPlan,
+    staged: Sequence[PlannedEpisode],
+    failures: Sequence[EpisodeFailure],
+    start: ReduceStart,
+    lerobot: DatasetReport | None,
+) -> DatasetReport:
+    """After the LeRobot dataset (``lerobot``, when asked for) is written: the same kept episodes, from the
+    same staging, into every other format (no second read of the bags), then the staging clean-up."""
     formats = plan.config.formats
-    report = (
-        write_dataset(
-            kept,
-            plan.config.output,
-            robot_type=plan.contract.robot_type,
-            limits=limits,
-            run_record=record,
-            overwrite=plan.config.overwrite,
-            qa=entries,
-            qa_config=plan.qa.model_dump(mode="json"),
-            append=plan.config.append,
-        )
-        if "lerobot" in formats
-        else None
-    )
-    # the same kept episodes, from the same staging, into every other format (no second read of the bags)
     others = write_formats(
-        kept, plan.config, robot_type=plan.contract.robot_type, run_record=record, qa=entries
+        start.kept,
+        plan.config,
+        robot_type=plan.contract.robot_type,
+        run_record=start.record,
+        qa=start.entries,
     )
-    report = replace(report or others[formats[0]], outputs=plan.config.format_outputs())
+    report = replace(lerobot or others[formats[0]], outputs=plan.config.format_outputs())
     if not plan.config.keep_staging:
         _remove_staged(plan, [e.dir_uri for e in staged])
     reused = tuple(_episode_name(e.bag_uri, e.segment) for e in staged if e.reused)
     return replace(report, converted=len(staged) + len(failures) - len(reused), reused=reused)
+
+
+def reduce_run(
+    plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
+) -> DatasetReport:
+    """The whole reduce in this process (:func:`start_reduce`, the LeRobot write, :func:`commit_reduce`);
+    the flow runs the same steps with each output file as its own task (``flows/reduce.py``)."""
+    start = start_reduce(plan, staged, failures)
+    if isinstance(start, DatasetReport):
+        return start
+    lerobot = (
+        write_dataset(
+            start.kept,
+            plan.config.output,
+            robot_type=plan.contract.robot_type,
+            limits=start.limits,
+            run_record=start.record,
+            overwrite=plan.config.overwrite,
+            qa=start.entries,
+            qa_config=plan.qa.model_dump(mode="json"),
+            append=plan.config.append,
+        )
+        if "lerobot" in plan.config.formats
+        else None
+    )
+    return commit_reduce(plan, staged, failures, start, lerobot)
 
 
 def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:

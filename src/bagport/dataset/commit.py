@@ -198,7 +198,9 @@ def commit_write(
         with scratch_folder("meta") as scratch:
             report = _build_meta(scratch, session, summaries, placed, base, robot_type, extras)
             publish_staged(scratch, session.output, session.staged, placed.digests, append=base is not None)
-        return report
+        fs, root = url_to_fs(session.output)
+        fs.invalidate_cache()
+        return _sized(report, int(fs.du(root)))
     build = Path(session.build)
     if base is None:
         reached("local.publish.files")

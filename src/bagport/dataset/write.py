@@ -9,10 +9,7 @@ files, hold a build location), write each planned file, then commit ``meta/`` an
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import replace
 from typing import Any
-
-from fsspec.core import url_to_fs
 
 from bagport.dataset.commit import DatasetReport, commit_write
 from bagport.dataset.files import write_planned_file
@@ -20,7 +17,6 @@ from bagport.dataset.meta import DatasetLimits
 from bagport.dataset.session import open_write
 from bagport.qa import QAEntry
 from bagport.staging import EpisodeSummary
-from bagport.uris import is_local
 
 __all__ = ["DatasetReport", "write_dataset"]
 
@@ -48,7 +44,7 @@ def write_dataset(
     """
     with open_write(summaries, output, limits=limits, overwrite=overwrite, append=append) as session:
         written = [write_planned_file(session.plan, item, session.build) for item in session.plan.files]
-        report = commit_write(
+        return commit_write(
             session,
             summaries,
             written,
@@ -57,8 +53,3 @@ def write_dataset(
             qa=qa,
             qa_config=qa_config,
         )
-    fs, out_path = url_to_fs(output)
-    if not is_local(fs):
-        fs.invalidate_cache()
-        report = replace(report, size_bytes=int(fs.du(out_path)))
-    return replace(report, root=output)

@@ -7,7 +7,7 @@ It never opens a data or video file: the placements, task counts, sizes and dige
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -20,7 +20,7 @@ from bagport.dataset.base import DatasetBase, read_base
 from bagport.dataset.crashpoints import reached
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.files import WrittenFile
-from bagport.dataset.meta import build_info, load_episode_stats, write_meta
+from bagport.dataset.meta import EpisodeStats, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
 from bagport.dataset.publish import commit_append, swap_into_place
 from bagport.dataset.qa import add_fleet_checks
@@ -108,10 +108,16 @@ def _build_meta(
     run_record, qa, qa_config = extras
     plan = session.plan
     sketches = DatasetSketches()  # the new episodes' quantile and step sketches, merged as they load
-    episode_stats = [
-        load_episode_stats(s, plan.first_episode + i, placed.data[i], placed.task_indices[i], sketches)
-        for i, s in enumerate(summaries)
-    ]
+    steps: list[EpisodeStats] = []  # each episode's largest steps only (the jump check's input)
+
+    def episode_stats() -> Iterator[EpisodeStats]:
+        for i, s in enumerate(summaries):
+            ep = load_episode_stats(
+                s, plan.first_episode + i, placed.data[i], placed.task_indices[i], sketches
+            )
+            steps.append(EpisodeStats({}, {}, ep.largest_steps))
+            yield ep
+
     total_frames = plan.first_index + sum(s.frames for s in summaries)
     info = build_info(
         session.features,
@@ -131,14 +137,12 @@ def _build_meta(
         plan.tasks,
         placed.data,
         placed.videos,
-        episode_stats,
+        episode_stats(),
         info,
         sketches,
         base,
     )
-    qa = add_fleet_checks(
-        qa, episode_stats, sketches, session.features, qa_config, plan.fps
-    )  # jumps vs the fleet
+    qa = add_fleet_checks(qa, steps, sketches, session.features, qa_config, plan.fps)  # jumps vs the fleet
     write_provenance(root, summaries, placed.data, run_record, base)
     entries, qa_report = finish_meta(
         root, session, summaries, qa, qa_config, base, robot_type, placed.digests

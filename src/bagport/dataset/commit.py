@@ -143,9 +143,9 @@ def _build_meta(
         base,
     )
     qa = add_fleet_checks(qa, steps, sketches, session.features, qa_config, plan.fps)  # jumps vs the fleet
-    write_provenance(root, summaries, placed.data, run_record, base)
+    write_provenance(root, summaries, placed.data, run_record, base, record=False)  # the record: last
     entries, qa_report = finish_meta(
-        root, session, summaries, qa, qa_config, base, robot_type, placed.digests
+        root, session, summaries, qa, qa_config, base, robot_type, placed.digests, run_record
     )
     return DatasetReport(
         session.output,

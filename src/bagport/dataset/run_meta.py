@@ -8,8 +8,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from bagport.dataset.base import DatasetBase
-from bagport.dataset.checksums import record_checksums
-from bagport.dataset.provenance import run_record_path
+from bagport.dataset.checksums import run_checksums
+from bagport.dataset.provenance import episode_provenance, run_record_path, write_run_record
 from bagport.dataset.qa import write_qa
 from bagport.qa import QAEntry
 from bagport.staging import EpisodeSummary
@@ -29,9 +29,10 @@ def finish_meta(
     base: DatasetBase | None,
     robot_type: str,
     written: Mapping[str, str],
+    run_record: dict[str, Any],
 ) -> tuple[list[QAEntry], str | None]:
-    """Write the QA files (earlier runs' index read from the dataset, never copied) and the run record's
-    checksums; returns the QA entries with dataset episode indices and the report's path (if any)."""
+    """Write the QA files (earlier runs' index read from the dataset, never copied), then the run record
+    with every episode's provenance and the checksums; returns the QA entries with dataset episode indices and the report's path (if any)."""
     plan = session.plan
     total_frames = plan.first_index + sum(s.frames for s in summaries)
     facts = {
@@ -62,5 +63,8 @@ def finish_meta(
         else None
     )
     carried = {} if base is None else base.checksums
-    record_checksums(root, run_record_path(base), carried, written)
+    record_rel = run_record_path(base)
+    tail = run_checksums(root, record_rel, carried, written)
+    episodes = (episode_provenance(s, i) for i, s in enumerate(summaries, plan.first_episode))
+    write_run_record(root / record_rel, run_record, episodes, tail)
     return entries, qa_report

@@ -53,7 +53,9 @@ def reduce_dataset(
             start.kept, config.output, limits=start.limits, overwrite=config.overwrite, append=config.append
         ) as session:
             get_run_logger().info("writing %d output file(s)", len(session.plan.files))
-            futures = [write_file_task.submit(session, item) for item in session.plan.files]
+            futures = [
+                write_file_task.submit(session.plan, item, session.build) for item in session.plan.files
+            ]
             wait(futures)
             for future in futures:
                 if not future.state.is_completed():

@@ -10,7 +10,7 @@ from prefect.states import Failed
 
 from bagport.dataset import DatasetReport
 from bagport.dataset.commit import commit_write
-from bagport.dataset.files import PlannedFile, WrittenFile, write_planned_file
+from bagport.dataset.files import FilePlan, PlannedFile, WrittenFile, write_planned_file
 from bagport.dataset.session import WriteSession
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import BagportError
@@ -62,10 +62,10 @@ def start_reduce_task(
 
 
 @task(name="write-file", task_run_name="write {item.name}", tags=["bagport", "write-file"])
-def write_file_task(session: WriteSession, item: PlannedFile) -> WrittenFile | State[Any]:
+def write_file_task(plan: FilePlan, item: PlannedFile, build: str) -> WrittenFile | State[Any]:
     """One output file (data or one camera's video file) from the staging store into the build location."""
     try:
-        return write_planned_file(session.plan, item, session.build)
+        return write_planned_file(plan, item, build)
     except BagportError as err:
         return _failed(err)
 

@@ -7,6 +7,7 @@ It never opens a data or video file: the placements, task counts, sizes and dige
 
 from __future__ import annotations
 
+import json
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -16,10 +17,11 @@ import numpy as np
 import numpy.typing as npt
 from fsspec.core import url_to_fs
 
-from bagport.dataset.base import DatasetBase, read_base
+from bagport.dataset.base import DatasetBase
 from bagport.dataset.crashpoints import reached
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.files import WrittenFile
+from bagport.dataset.layout import INFO_PATH
 from bagport.dataset.meta import EpisodeStats, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
 from bagport.dataset.publish import commit_append, swap_into_place
@@ -174,6 +176,13 @@ def check_same_features(base: DatasetBase, info: dict[str, Any]) -> None:
     )
 
 
+def _total_episodes(output: str) -> int:
+    fs, root = url_to_fs(output)
+    fs.invalidate_cache()
+    with fs.open(f"{root.rstrip('/')}/{INFO_PATH}", "r", encoding="utf-8") as handle:
+        return int(json.load(handle)["total_episodes"])
+
+
 def _meta_size(root: Path) -> int:
     return sum(p.stat().st_size for p in (root / "meta").rglob("*") if p.is_file())
 
@@ -189,11 +198,11 @@ def commit_write(
     qa_config: dict[str, Any] | None = None,
 ) -> DatasetReport:
     """Write ``meta/`` from the written files' results and publish the write (see the module docstring)."""
-    base = read_base(session.output) if session.mode == "append" else None
-    if base is not None and base.episodes != session.plan.first_episode:
+    base = session.base
+    if base is not None and _total_episodes(session.output) != base.episodes:
         raise DatasetWriteError(
-            f"{session.output} changed during the append ({base.episodes} episodes, planned for "
-            f"{session.plan.first_episode}); nothing was written. Fix: run the append again (one at a time)."
+            f"{session.output} changed during the append (it had {base.episodes} episodes when the append "
+            "started); nothing was written. Fix: run the append again (one append at a time per dataset)."
         )
     placed = gather(session, written, len(summaries))
     extras = (run_record or {}, qa, qa_config or {})

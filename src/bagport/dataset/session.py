@@ -47,6 +47,8 @@ class WriteSession:
     features: tuple[StagedFeature, ...]
     mode: Literal["publish", "append"]
     remote: bool
+    base: DatasetBase | None = None
+    """What an append adds to, read once when the write opened (the commit checks it did not change)."""
 
     @property
     def staged(self) -> str:
@@ -133,14 +135,16 @@ def open_write(
     mode: Literal["publish", "append"] = "append" if appending else "publish"
     if is_local(fs):
         with building_beside(Path(out_path)) as build:
-            yield WriteSession(output, str(build), plan, features, mode, remote=False)
+            yield WriteSession(output, str(build), plan, features, mode, remote=False, base=base)
         return
     root = out_path.rstrip("/")
     staged = STAGED_DIR.format(run_id=uuid.uuid4().hex[:8])
     write_journal(fs, root, Journal(op=mode, staged=staged, files=()))
     reached("s3.journaled")
     try:
-        yield WriteSession(output, fs.unstrip_protocol(f"{root}/{staged}"), plan, features, mode, remote=True)
+        yield WriteSession(
+            output, fs.unstrip_protocol(f"{root}/{staged}"), plan, features, mode, remote=True, base=base
+        )
     except Exception:  # a failure, not a kill (that is left to recovery): nothing of this write stays
         drop_staged(output, staged)
         raise

@@ -219,7 +219,7 @@ def _tables(results: dict[str, list[dict[str, float]]]) -> str:
         lines += ["The reduce of W1 (staged once) on a local Dask cluster:", "",
                   "| workers | reduce wall s | output files (tasks) | load avg (1 min) |", "|---|---|---|---|"]  # fmt: skip
         lines += [
-            f"| {r['workers']} | {r['wall_s']:.1f} | {r['files']} | {r['load']:.1f} |"
+            f"| {r['workers']} | {r['wall_s']:.2f} | {r['files']} | {r['load']:.1f} |"
             for r in results["dask"]
         ]
         lines.append("")
@@ -252,7 +252,7 @@ def main() -> None:
     if "dask" in parts:
         results["dask"] = measure_dask(stage("W1", args.data), out, (1, 2))
     args.results.write_text(json.dumps(results, indent=1))
-    body = _tables(results) + f"Command: `.venv/bin/python bench/reduce_map.py --parts {args.parts}`."
+    body = _tables(results) + f"\nCommand: `.venv/bin/python bench/reduce_map.py --parts {args.parts}`."
     print(body)
     write_section(args.report, "reduce-map", body)
 

@@ -132,33 +132,26 @@ def _build_meta(
     )
     if base is not None:
         check_same_features(base, info)
-    sketches = write_meta(
-        root,
-        summaries,
-        session.features,
-        plan.tasks,
-        placed.data,
-        placed.videos,
-        episode_stats(),
-        info,
-        sketches,
-        base,
-    )
+    meta = (session.features, plan.tasks, placed.data, placed.videos)
+    sketches = write_meta(root, summaries, *meta, episode_stats(), info, sketches, base)
     qa = add_fleet_checks(qa, steps, sketches, session.features, qa_config, plan.fps)  # jumps vs the fleet
     write_provenance(root, summaries, placed.data, run_record, base, record=False)  # the record: last
     entries, qa_report = finish_meta(
         root, session, summaries, qa, qa_config, base, robot_type, placed.digests, run_record
     )
+    briefs = tuple(e.brief() for e in entries)
+    excluded = tuple(e.brief() for e in entries if e.episode_index is None)
+    episodes, duration_s = int(info["total_episodes"]), total_frames / plan.fps
     return DatasetReport(
         session.output,
-        info["total_episodes"],
+        episodes,
         total_frames,
-        tuple(plan.tasks),
+        plan.tasks,
         tuple(placed.videos),
         0,
-        total_frames / plan.fps,
-        tuple(e.brief() for e in entries if e.episode_index is None),
-        tuple(e.brief() for e in entries),
+        duration_s,
+        excluded,
+        briefs,
         qa_report,
     )
 

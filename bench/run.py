@@ -1,5 +1,6 @@
 """`make bench`: bagport vs the LeRobot-writer baseline vs the codec floor, on W1/W2/W3; W4, a fleet of
-2,000 one-second bags, converted once and re-run (``bench/fleet.py``).
+2,000 one-second bags, converted once and re-run (``bench/fleet.py``); REDUCE, the reduce as a map
+(``bench/reduce_map.py``: appends against the dataset's size, the commit's memory, W1's reduce on Dask).
 
 Each tool runs as a fresh process tree on the same generated bags; wall time, CPU seconds (the
 tree's, from the kernel's child accounting), peak RSS of the whole tree (sampled every 0.2 s) and
@@ -164,7 +165,9 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--workloads", default="W1,W2,W3,W4")
+    parser.add_argument(
+        "--workloads", default="W1,W2,W3,W4,REDUCE", help="REDUCE: the reduce as a map (bench/reduce_map.py)"
+    )
     parser.add_argument("--tools", default=",".join(TOOLS))
     parser.add_argument("--runs", type=int, default=3)
     parser.add_argument(
@@ -190,6 +193,17 @@ def main() -> None:
         if before.get("scale") == args.scale:
             results["workloads"] = before.get("workloads", {})
     for name in args.workloads.split(","):
+        if name == "REDUCE":  # appends vs dataset size, the commit's memory, W1's reduce on 1 vs 2 workers
+            script = [
+                sys.executable,
+                str(BENCH / "reduce_map.py"),
+                "--data",
+                str(args.data),
+                "--report",
+                str(args.report),
+            ]
+            subprocess.run(script, check=True, cwd=REPO)
+            continue
         workload = WORKLOADS[name].scaled(args.scale)
         print(
             f"{name}: generating {workload.episodes} x {workload.duration_s:g} s ...",

@@ -94,7 +94,8 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     import pydantic  # noqa: PLC0415
 
     from bagport.dataset.history import dataset_report  # noqa: PLC0415
-    from bagport.run import finish_up_to_date, plan_run, summary_json  # noqa: PLC0415
+    from bagport.reduce import finish_up_to_date, summary_json  # noqa: PLC0415
+    from bagport.run import plan_run  # noqa: PLC0415
 
     try:
         config = convert_config(args, vars(build_parser().parse_args(["convert"])))

@@ -19,15 +19,16 @@ from bagport.dataset.history import dataset_report
 from bagport.episode import EpisodeRequest
 from bagport.episode.staged import PlannedEpisode, split_staged
 from bagport.errors import BagportError, QualityError
+from bagport.reduce import finish_up_to_date
 from bagport.request import EpisodeOutcome
-from bagport.run import EpisodeFailure, RunPlan, finish_up_to_date, plan_run
+from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
+from flows.reduce import reduce_dataset
 from flows.run_story import completed_state
 from flows.runners import RayMissingError, ServerDownError, dask_runner, prefect_api, ray_runner
 from tasks.episode import convert_batch_task, convert_episode_task
 from tasks.plan import plan_task
-from tasks.reduce import reduce_task
 from tasks.segment import segment_bag_task
 
 __all__ = [
@@ -132,15 +133,11 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
             "\n".join(f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures),
         )
     logger.info("%d episode(s) staged; writing the dataset", len(staged))
-    reduced = reduce_task(plan, staged, failures, return_state=True)
-    if not reduced.is_completed():
-        # the error itself travels as the state's data: the CLI picks its exit code by its type
-        reduce_error = reduced.result(raise_on_failure=False)
-        return Failed(
-            message=reduced.message or "writing the dataset failed",
-            data=reduce_error if isinstance(reduce_error, BagportError) else None,
-        )
-    report: DatasetReport = reduced.result()  # type: ignore[assignment] # completed: a report
+    # one task per output file, then the commit (flows/reduce.py); a failure's error travels as the
+    # state's data: the CLI picks its exit code by its type
+    report = reduce_dataset(plan, staged, failures)
+    if not isinstance(report, DatasetReport):
+        return report
     publish_run_artifacts(report)
     return completed_state(report)  # "Completed with exclusions" in run lists when bags were left out
 

@@ -1,4 +1,5 @@
-"""Merge staged episodes into the LeRobot dataset (the reduce step)."""
+"""Merge staged episodes into the LeRobot dataset (the reduce step): one task per output file (the flow
+selects the episodes and commits, ``flows/reduce.py``), or the whole reduce in one task for other formats."""
 
 from __future__ import annotations
 
@@ -9,23 +10,22 @@ from prefect.client.schemas.objects import State
 from prefect.states import Failed
 
 from bagport.dataset import DatasetReport
+from bagport.dataset.files import FilePlan, PlannedFile, WrittenFile, write_planned_file
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import BagportError
-from bagport.run import EpisodeFailure, RunPlan, reduce_run
+from bagport.reduce import reduce_run
+from bagport.run import EpisodeFailure, RunPlan
 
-__all__ = ["reduce_task"]
+__all__ = ["log_report", "reduce_task", "write_file_task"]
 
 
-@task(name="write-dataset")
-def reduce_task(
-    plan: RunPlan, staged: list[PlannedEpisode], failures: list[EpisodeFailure]
-) -> DatasetReport | State[Any]:
-    """Ends Failed with bagport's one-paragraph error as the message when the dataset cannot be written."""
-    try:
-        report = reduce_run(plan, staged, failures)
-    except BagportError as err:
-        get_run_logger().error("%s", err)
-        return Failed(message=str(err), data=err)  # the error's type decides the CLI's exit code
+def _failed(err: BagportError) -> State[Any]:
+    get_run_logger().error("%s", err)
+    return Failed(message=str(err), data=err)  # the error's type decides the CLI's exit code
+
+
+def log_report(report: DatasetReport) -> None:
+    """What the run wrote, and each excluded bag, in the run's log."""
     logger = get_run_logger()
     logger.info(
         "wrote %d episode(s), %d frames to %s (%d converted now, %d reused from the staging store)",
@@ -35,4 +35,26 @@ def reduce_task(
         logger.info("wrote %s at %s", fmt, output)
     for row in report.excluded:
         logger.warning("excluded %s: %s", row.bag_uri, row.reason)
+
+
+@task(name="write-dataset")
+def reduce_task(
+    plan: RunPlan, staged: list[PlannedEpisode], failures: list[EpisodeFailure]
+) -> DatasetReport | State[Any]:
+    """The whole reduce in one task (formats other than LeRobot only). Ends Failed with bagport's
+    one-paragraph error as the message when the dataset cannot be written."""
+    try:
+        report = reduce_run(plan, staged, failures)
+    except BagportError as err:
+        return _failed(err)
+    log_report(report)
     return report
+
+
+@task(name="write-file", task_run_name="write {item.name}", tags=["bagport", "write-file"])
+def write_file_task(plan: FilePlan, item: PlannedFile, build: str) -> WrittenFile | State[Any]:
+    """One output file (data or one camera's video file) from the staging store into the build location."""
+    try:
+        return write_planned_file(plan, item, build)
+    except BagportError as err:
+        return _failed(err)

@@ -69,7 +69,8 @@ def convert_in_process(bags: str, contract_text: str, tmp_path: Path, **options:
     dataset's folder.
     ``bags`` is a glob or a manifest; ``options`` are further :class:`ConvertConfig` fields."""
     from bagport.config import ConvertConfig  # noqa: PLC0415
-    from bagport.run import plan_run, reduce_run, stage_all  # noqa: PLC0415
+    from bagport.reduce import reduce_run  # noqa: PLC0415
+    from bagport.run import plan_run, stage_all  # noqa: PLC0415
     from bagport.segment import segment_request  # noqa: PLC0415
 
     contract = tmp_path / "contract.yaml"

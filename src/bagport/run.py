@@ -1,4 +1,4 @@
-"""A conversion run as library calls: plan the episodes, then reduce staged results.
+"""A conversion run as library calls: plan the episodes (the reduce is :mod:`bagport.reduce`).
 
 The orchestration (fan-out, retries, runners) lives in ``flows/``; these
 functions are what it calls before and after the per-episode map.
@@ -8,10 +8,8 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
 
 from fsspec.core import url_to_fs
 
@@ -19,30 +17,27 @@ from bagport import __version__
 from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
-from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
+from bagport.dataset import DatasetReport
 from bagport.dataset.base import read_base
-from bagport.dataset.history import converted_bags, dataset_report, record_exclusions, recorded_write_key
+from bagport.dataset.history import converted_bags, recorded_write_key
 from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError
-from bagport.formats import check_format_outputs, write_formats
+from bagport.formats import check_format_outputs
 from bagport.manifest import Manifest, ManifestWindow, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
-from bagport.segment import kept_segmentation, segment_request, segments_bags
-from bagport.selection import EpisodeFailure, select_episodes
-from bagport.staging import EpisodeSummary, read_summary
+from bagport.segment import segment_request, segments_bags
+from bagport.selection import EpisodeFailure
 from bagport.uris import read_text, require_bucket
 from bagport.video import EncoderSettings
 
 __all__ = [
     "EpisodeFailure",
-    "finish_up_to_date",
     "PlannedEpisode",
     "RunPlan",
     "plan_run",
-    "reduce_run",
     "segment_all",
     "stage_all",
     "up_to_date",
@@ -203,16 +198,6 @@ def _mark_up_to_date(plan: RunPlan) -> RunPlan:
     return replace(plan, up_to_date=True)
 
 
-def finish_up_to_date(plan: RunPlan) -> DatasetReport:
-    """The report of a run whose dataset is up to date: the dataset as it stands, every episode reused,
-    none converted; the staged episodes are removed unless ``keep_staging`` (as a write would)."""
-    if not plan.config.keep_staging:
-        _remove_staged(plan, [e.dir_uri for e in plan.reused])
-    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in plan.reused)
-    report = dataset_report(plan.config.output)
-    return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs())
-
-
 def up_to_date(report: DatasetReport) -> bool:
     """Whether the report is of a run that wrote nothing: every episode reused, no QA row written."""
     return not report.converted and bool(report.reused) and not report.qa
@@ -269,131 +254,3 @@ def stage_all(plan: RunPlan, requests: Sequence[EpisodeRequest] | None = None) -
     for request in todo:
         convert_episode(request)
     return [*plan.reused, *(PlannedEpisode.of(r) for r in todo)]
-
-
-def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str, Any]:
-    reused = [_episode_name(e.bag_uri, e.segment) for e in staged if e.reused]
-    return {
-        "bagport_version": __version__,
-        "repo_id": plan.config.resolved_repo_id(),
-        "contract": {"uri": plan.config.contract, "text": plan.contract_text},
-        "manifest": {
-            "uri": plan.config.manifest or plan.config.bags_glob,
-            "bags": [b.uri for b in plan.manifest.bags],
-            "converted_now": [r.bag_uri for r in plan.requests],
-            "reused": reused,
-        },
-        "episodes_reused": len(reused),
-        "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
-        "host_cpus": os.cpu_count(),
-    }
-
-
-def _episode_name(bag_uri: str, segment: int | None) -> str:
-    return bag_uri if segment is None else f"{bag_uri}#{segment}"
-
-
-def reduce_run(
-    plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
-) -> DatasetReport:
-    """Read the staged summaries, put on each what the current plan decides about it (manifest entry,
-    metadata, label: never the staged record's, which may come from another manifest), apply the QA
-    policy, and write the dataset in manifest order."""
-    summaries: list[EpisodeSummary] = []
-    stamped: list[PlannedEpisode] = []
-    for episode in staged:
-        summary = read_summary(episode.dir_uri)
-        if summary is None:
-            raise DatasetWriteError(
-                f"staged episode {episode.dir_uri} is incomplete (no episode.json); re-run the conversion."
-            )
-        summaries.append(episode.apply(summary))
-        stamped.append(replace(episode, source_stamp=summary.source_stamp))
-    fs, out_path = url_to_fs(plan.config.output)
-    kept, entries = select_episodes(
-        summaries,
-        failures,
-        policy=plan.qa.on_fail,
-        keep_labelled=plan.config.keep_failed,
-        output=plan.config.output,
-        appending=plan.config.append and bool(fs.exists(out_path)),
-    )
-    limits = DatasetLimits(
-        chunks_size=plan.config.chunks_size,
-        data_files_size_in_mb=plan.config.data_files_size_in_mb,
-        video_files_size_in_mb=plan.config.video_files_size_in_mb,
-    )
-    record = run_record(plan, staged)
-    if not plan.config.append:  # an append's record describes its own episodes only
-        record["write_key"] = write_key(plan, stamped, failures)
-    # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
-    record["excluded"] = [
-        replace(e.brief(), source_stamp=source_stamp(e.qa.bag_uri)).to_json()
-        for e in entries
-        if e.episode_index is None
-    ]
-    if not kept:  # an append whose new bags were all excluded: recorded, nothing written
-        record_exclusions(plan.config.output, record)
-        excluded = tuple(e.brief() for e in entries)
-        return replace(dataset_report(plan.config.output), excluded=excluded, qa=excluded)
-    formats = plan.config.formats
-    report = (
-        write_dataset(
-            kept,
-            plan.config.output,
-            robot_type=plan.contract.robot_type,
-            limits=limits,
-            run_record=record,
-            overwrite=plan.config.overwrite,
-            qa=entries,
-            qa_config=plan.qa.model_dump(mode="json"),
-            append=plan.config.append,
-        )
-        if "lerobot" in formats
-        else None
-    )
-    # the same kept episodes, from the same staging, into every other format (no second read of the bags)
-    others = write_formats(
-        kept, plan.config, robot_type=plan.contract.robot_type, run_record=record, qa=entries
-    )
-    report = replace(report or others[formats[0]], outputs=plan.config.format_outputs())
-    if not plan.config.keep_staging:
-        _remove_staged(plan, [e.dir_uri for e in staged])
-    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in staged if e.reused)
-    return replace(report, converted=len(staged) + len(failures) - len(reused), reused=reused)
-
-
-def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:
-    """Remove this run's staged episodes and kept segmentations, then the staging store if it is empty
-    (another run may share it)."""
-    fs, path = url_to_fs(plan.config.resolved_staging())
-    kept_segmentations = (kept_segmentation(r, plan.contract) for r in plan.requests)
-    for uri in (*staged_dirs, *(u for u in kept_segmentations if u is not None)):
-        _, staged_path = url_to_fs(uri)
-        if fs.exists(staged_path):
-            fs.rm(staged_path, recursive=True)
-    try:
-        if fs.exists(path) and not fs.find(path):
-            fs.rm(path, recursive=True)
-    except OSError:
-        pass
-
-
-def summary_json(report: DatasetReport) -> str:
-    return json.dumps(
-        {
-            "root": report.root,
-            "episodes": report.episodes,
-            "frames": report.frames,
-            "duration_s": round(report.duration_s, 3),
-            "tasks": list(report.tasks),
-            "videos": list(report.video_keys),
-            "size_bytes": report.size_bytes,
-            "excluded": [row.to_json() for row in report.excluded],
-            "converted_now": report.converted,
-            "reused": len(report.reused),
-            "up_to_date": up_to_date(report),
-            "outputs": report.outputs,
-        },
-        indent=2,
-    )

@@ -48,7 +48,7 @@ class StagedFeature:
     dtype: str
     shape: tuple[int, ...]
     names: tuple[str, ...] | None
-    video_info: dict[str, Any] | None = None
+    video_info: dict[str, JsonValue] | None = None
     sources: tuple[str, ...] = ()
 
 

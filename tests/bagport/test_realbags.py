@@ -23,7 +23,8 @@ from bagport.decode.defaults import DEFAULT_FIELDS
 from bagport.decode.paths import resolve_path
 from bagport.errors import AlignmentError, ContractError, QualityError
 from bagport.feature_table import describe_features
-from bagport.run import plan_run, reduce_run, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, stage_all
 from bagport.video.settings import default_encoder
 from tests.helpers import REPO, realbag
 

@@ -13,7 +13,8 @@ from s3fs import S3FileSystem
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import DatasetWriteError, QualityError
-from bagport.run import EpisodeFailure, PlannedEpisode, finish_up_to_date, plan_run, reduce_run, stage_all
+from bagport.reduce import finish_up_to_date, reduce_run
+from bagport.run import EpisodeFailure, PlannedEpisode, plan_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 

@@ -71,6 +71,10 @@ def test_s3_bags_staging_and_output_on_an_existing_dask_cluster(
     assert len(ran) == 2
     assert {t["worker"] for t in ran} <= set(workers)
     assert os.getpid() not in workers.values()
+    # So did writing the output files (the data file and each camera's video file: one task each, their
+    # files uploaded from the workers into the write's staged prefix); the commit runs in the flow.
+    wrote = [t for t in stream.data if str(t["key"]).startswith("write_file_task-")]
+    assert len(wrote) == 3 and {t["worker"] for t in wrote} <= set(workers)
     local = tmp_path / "downloaded"
     fs.get("fleet/datasets/sample", str(local), recursive=True)
     report = validate_dataset(local, repo_id="test/s3")

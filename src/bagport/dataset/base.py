@@ -6,6 +6,7 @@ the last existing ones, and only ``meta/`` is replaced (see :mod:`bagport.datase
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from dataclasses import dataclass
@@ -15,6 +16,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 import pandas as pd
+import pyarrow.parquet as pq
 from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
@@ -44,9 +46,14 @@ class DatasetBase:
     data_files: tuple[str, ...] = ()
     """The existing data files (never rewritten; read only to sketch a dataset that has no sketches yet)."""
     checksums: dict[str, str] | None = None
-    """SHA-256 of the existing data and video files, from the newest run record (``None``: not recorded)."""
+    """SHA-256 of every existing file, from the newest run record plus that record's own (``None``: not
+    recorded); an append carries them over instead of reading the files again."""
     sketches: DatasetSketches | None = None
     """The dataset's merged quantile sketches (``None``: written before they were kept)."""
+    root: str = ""
+    """Where the dataset is (a path or fsspec URI): an append reads its few old ``meta/`` files from here."""
+    label_columns: bool = True
+    """Whether its episodes files have the label columns (older ones do not; one schema for LeRobot)."""
 
     @property
     def episodes(self) -> int:
@@ -95,7 +102,13 @@ def read_base(root: str | Path) -> DatasetBase:
     video_keys = [k for k, f in info["features"].items() if f.get("dtype") == "video"]
     runs = fs.glob(f"{path}/meta/provenance/run*.json")
     newest = latest_record([str(r) for r in runs])
-    files = _read_json(fs, newest).get("files") if newest is not None else None
+    files = None
+    if newest is not None:
+        with fs.open(newest, "rb") as handle:
+            raw = handle.read()
+        files = json.loads(raw).get("files")
+        if files is not None:
+            files = {**files, str(newest)[len(path) + 1 :]: hashlib.sha256(raw).hexdigest()}
     return DatasetBase(
         info=info,
         tasks=tasks,
@@ -111,8 +124,18 @@ def read_base(root: str | Path) -> DatasetBase:
         data_files=tuple(
             fs.unstrip_protocol(p) for p in sorted(fs.glob(f"{path}/data/chunk-*/file-*.parquet"))
         ),
-        checksums=None
-        if files is None
-        else {rel: digest for rel, digest in files.items() if rel.startswith(("data/", "videos/"))},
+        checksums=files,
         sketches=read_sketches(fs, path),
+        root=fs.unstrip_protocol(path),
+        label_columns=_has_label_columns(fs, path),
     )
+
+
+def _has_label_columns(fs: AbstractFileSystem, path: str) -> bool:
+    """Whether the dataset's episodes files carry the label columns (its first one's schema: a footer read)."""
+    existing = sorted(fs.glob(f"{path}/meta/episodes/chunk-*/file-*.parquet"))
+    if not existing:
+        return True
+    with fs.open(existing[0], "rb") as handle:
+        names = pq.read_schema(handle).names
+    return all(name in names for name in ("label", "label_note"))

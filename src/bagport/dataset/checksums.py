@@ -18,7 +18,7 @@ from typing import Any
 from bagport.dataset.journal import file_sha256
 from bagport.errors import ValidationError
 
-__all__ = ["CHECKED_FOLDERS", "latest_record", "record_checksums", "verify_checksums"]
+__all__ = ["CHECKED_FOLDERS", "latest_record", "run_checksums", "verify_checksums"]
 
 CHECKED_FOLDERS = ("data", "videos", "meta")
 _RUN = re.compile(r"run(?:-(\d+))?\.json")
@@ -32,25 +32,23 @@ def latest_record(names: list[str]) -> str | None:
     return max(numbered)[1] if numbered else None
 
 
-def _digests(root: Path, skip: str) -> dict[str, str]:
+def _meta_digests(root: Path, skip: str) -> dict[str, str]:
     return {
         rel: file_sha256(path)
-        for folder in CHECKED_FOLDERS
-        for path in sorted((root / folder).rglob("*"))
+        for path in sorted((root / "meta").rglob("*"))
         if path.is_file() and (rel := path.relative_to(root).as_posix()) != skip
     }
 
 
-def record_checksums(root: Path, record_rel: str, carried: Mapping[str, str] | None) -> None:
-    """Add ``files`` to the run record at ``root/record_rel``: the digests of everything under ``root``
-    plus ``carried`` (an append's untouched data/video files; ``None`` when the dataset it appends to
-    recorded none, so the list is partial and ``validate`` does not look for files missing from it)."""
-    path = root / record_rel
-    record: dict[str, Any] = json.loads(path.read_text())
-    digests = {**(carried or {}), **_digests(root, record_rel)}
-    record["files"] = dict(sorted(digests.items()))
-    record["files_complete"] = carried is not None
-    path.write_text(json.dumps(record, indent=2, default=str))
+def run_checksums(
+    root: Path, record_rel: str, carried: Mapping[str, str] | None, written: Mapping[str, str]
+) -> dict[str, Any]:
+    """The run record's ``files`` and ``files_complete``: the digests of the files under ``root/meta`` (this
+    run's; the record itself aside), of the data and video files this run ``written`` (their writers hashed
+    them), and ``carried`` (an append's untouched files, from the previous record; ``None`` when the dataset
+    it appends to recorded none, so the list is partial and ``validate`` does not look for files missing)."""
+    digests = {**(carried or {}), **written, **_meta_digests(root, record_rel)}
+    return {"files": dict(sorted(digests.items())), "files_complete": carried is not None}
 
 
 def verify_checksums(root: Path) -> int:

@@ -19,8 +19,9 @@ __all__ = ["STEPS", "StepHook", "kill_after", "reached", "set_hook"]
 StepHook = Callable[[str], None]
 
 STEPS: dict[str, tuple[str, ...]] = {
-    "local.publish": ("local.publish.built", "local.publish.swapped"),
+    "local.publish": ("local.publish.files", "local.publish.built", "local.publish.swapped"),
     "local.append": (
+        "local.append.files",
         "local.append.built",
         "local.append.journaled",
         "local.append.moving",
@@ -29,8 +30,9 @@ STEPS: dict[str, tuple[str, ...]] = {
         "local.append.cleaned",
     ),
     "s3": (
-        "s3.built",
         "s3.journaled",
+        "s3.files",
+        "s3.built",
         "s3.staging",
         "s3.staged",
         "s3.committing",

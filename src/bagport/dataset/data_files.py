@@ -15,9 +15,9 @@ import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
 from bagport.dataset.layout import DATA_PATH, next_chunk_file
-from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
+from bagport.staging import StagedFeature
 
-__all__ = ["DataPlacement", "hf_features_metadata", "write_data_files"]
+__all__ = ["DataPlacement", "DataWritten", "hf_features_metadata", "task_counts", "write_data_files"]
 
 _MB = 1024 * 1024
 
@@ -50,13 +50,13 @@ def hf_features_metadata(vectors: Sequence[StagedFeature]) -> bytes:
 
 
 def _episode_table(
-    summary: EpisodeSummary,
+    frames_uri: str,
     episode_index: int,
     first_index: int,
     task_index: dict[str, int],
     vectors: Sequence[StagedFeature],
 ) -> pa.Table:
-    fs, path = url_to_fs(summary.file(FRAMES_FILE))
+    fs, path = url_to_fs(frames_uri)
     with fs.open(path, "rb") as handle:
         staged = pq.read_table(handle)
     frames = staged.num_rows
@@ -80,9 +80,25 @@ def _would_exceed(path: Path, frames_in_file: int, frames: int, file_size_in_mb:
     return size_mb + per_frame_mb * frames >= file_size_in_mb
 
 
+def task_counts(table: pa.Table) -> tuple[tuple[int, int], ...]:
+    """An episode's frames per task index (what its ``task_index`` stats need, without its frames)."""
+    indices, counts = np.unique(table.column("task_index").to_numpy(), return_counts=True)
+    return tuple((int(i), int(c)) for i, c in zip(indices, counts, strict=True))
+
+
+@dataclass(frozen=True, slots=True)
+class DataWritten:
+    placements: tuple[DataPlacement, ...]
+    """One per episode."""
+    task_counts: tuple[tuple[tuple[int, int], ...], ...]
+    """One per episode: (task index, frames) pairs."""
+    files: tuple[str, ...]
+    """The files written, relative to the root."""
+
+
 def write_data_files(
     root: Path,
-    summaries: Sequence[EpisodeSummary],
+    frames_uris: Sequence[str],
     vectors: Sequence[StagedFeature],
     task_index: dict[str, int],
     *,
@@ -91,14 +107,16 @@ def write_data_files(
     start: tuple[int, int] = (0, 0),
     first_episode_index: int = 0,
     first_index: int = 0,
-) -> list[DataPlacement]:
-    """Stream staged frame tables into rotated data files; returns one placement per episode.
+) -> DataWritten:
+    """Stream staged frame tables (one ``frames.parquet`` per episode) into rotated data files.
 
     A file rotates as LeRobot's writer rotates it: when its size on disk plus the episode's frames at
     the file's average bytes per frame reaches ``file_size_in_mb``.  ``start`` (chunk, file) and the
     first episode/global indices let an append continue a dataset.
     """
     placements: list[DataPlacement] = []
+    counts: list[tuple[tuple[int, int], ...]] = []
+    files: list[str] = []
     chunk, file = start
     writer: pq.ParquetWriter | None = None
     schema: pa.Schema | None = None
@@ -106,14 +124,15 @@ def write_data_files(
     frames_in_file = 0
     metadata = {b"huggingface": hf_features_metadata(vectors)}
     try:
-        for episode_index, summary in enumerate(summaries, start=first_episode_index):
-            table = _episode_table(summary, episode_index, first_index, task_index, vectors)
+        for episode_index, frames_uri in enumerate(frames_uris, start=first_episode_index):
+            table = _episode_table(frames_uri, episode_index, first_index, task_index, vectors)
             if writer is not None and _would_exceed(path, frames_in_file, table.num_rows, file_size_in_mb):
                 writer.close()
                 writer = None
                 chunk, file = next_chunk_file(chunk, file, chunks_size)
             if writer is None or schema is None:
-                path = root / DATA_PATH.format(chunk_index=chunk, file_index=file)
+                files.append(DATA_PATH.format(chunk_index=chunk, file_index=file))
+                path = root / files[-1]
                 path.parent.mkdir(parents=True, exist_ok=True)
                 schema = table.schema.with_metadata(metadata)
                 writer = pq.ParquetWriter(path, schema, compression="snappy")
@@ -121,8 +140,9 @@ def write_data_files(
             writer.write_table(table.cast(schema), row_group_size=max(1, table.num_rows))
             frames_in_file += table.num_rows
             placements.append(DataPlacement(chunk, file, first_index, first_index + table.num_rows))
+            counts.append(task_counts(table))
             first_index += table.num_rows
     finally:
         if writer is not None:
             writer.close()
-    return placements
+    return DataWritten(tuple(placements), tuple(counts), tuple(files))

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -31,14 +31,15 @@ from bagport.dataset.layout import (
     next_chunk_file,
 )
 from bagport.dataset.sketches import DatasetSketches, sketches_from_data_files
+from bagport.dataset.stats_parts import StatsParts
 from bagport.dataset.videos import VideoPlacement
 from bagport.staging import FRAMES_FILE, STATS_FILE, EpisodeSummary, StagedFeature
 from bagport.stats import (
     FeatureStats,
     VectorSketch,
     episode_sketch_fields,
-    merge_feature_stats,
-    merge_histograms,
+    histogram_stats,
+    merge_stacked_stats,
     stats_from_json,
     vector_stats,
 )
@@ -188,10 +189,53 @@ def _stat_columns(stats: dict[str, FeatureStats], keys: Sequence[str]) -> dict[s
 _LABEL_COLUMNS = ("label", "label_note")
 
 
-def _has_label_columns(root: Path) -> bool:
-    """Whether the dataset's existing episode files carry the label columns (older ones do not)."""
-    existing = sorted((root / "meta" / "episodes").glob("chunk-*/file-*.parquet"))
-    return not existing or all(name in pq.read_schema(existing[0]).names for name in _LABEL_COLUMNS)
+_TABLE_ROWS = 10 * EPISODES_BATCH
+"""Episode rows built into one table at once (memory stays flat in the number of episodes)."""
+
+
+def _episode_tables(
+    summaries: Sequence[EpisodeSummary],
+    data: Sequence[DataPlacement],
+    videos: dict[str, list[VideoPlacement]],
+    episode_stats: Iterator[EpisodeStats],
+    stat_keys: Sequence[str],
+    first_episode: int,
+    base: DatasetBase | None,
+) -> Iterator[pa.Table]:
+    """The ``meta/episodes`` rows, :data:`_TABLE_ROWS` at a time, all of the first table's schema."""
+    schema: pa.Schema | None = None
+    for offset in range(0, len(summaries), _TABLE_ROWS):
+        rows = []
+        for n in range(offset, min(offset + _TABLE_ROWS, len(summaries))):
+            summary, placement = summaries[n], data[n]
+            row: dict[str, Any] = {
+                "episode_index": first_episode + n,
+                "tasks": list(summary.tasks),
+                "length": summary.frames,
+                "data/chunk_index": placement.chunk_index,
+                "data/file_index": placement.file_index,
+                "dataset_from_index": placement.from_index,
+                "dataset_to_index": placement.to_index,
+                "label": summary.label,
+                "label_note": summary.note,
+            }
+            for key, placed in videos.items():
+                video = placed[n]
+                row[f"videos/{key}/chunk_index"] = video.chunk_index
+                row[f"videos/{key}/file_index"] = video.file_index
+                row[f"videos/{key}/from_timestamp"] = video.from_timestamp_s
+                row[f"videos/{key}/to_timestamp"] = video.to_timestamp_s
+            row.update(_stat_columns(next(episode_stats).stats, stat_keys))
+            rows.append(row)
+        table = pa.Table.from_pylist(rows)
+        for name in _LABEL_COLUMNS:  # typed even when every episode's label is null
+            table = table.set_column(
+                table.schema.get_field_index(name), name, table.column(name).cast(pa.string())
+            )
+        if base is not None and not base.label_columns:
+            table = table.drop_columns(list(_LABEL_COLUMNS))  # LeRobot loads episode files of one schema only
+        schema = schema or table.schema
+        yield table.cast(schema)
 
 
 def write_meta(
@@ -201,7 +245,7 @@ def write_meta(
     tasks: Sequence[str],
     data: Sequence[DataPlacement],
     videos: dict[str, list[VideoPlacement]],
-    episode_stats: Sequence[EpisodeStats],
+    episode_stats: Iterable[EpisodeStats],
     info: dict[str, Any],
     sketches: DatasetSketches,
     base: DatasetBase | None = None,
@@ -209,7 +253,15 @@ def write_meta(
     """Write ``meta/``; with ``base`` (an append) the new episodes continue the existing ones in new
     episodes files, and stats merge with the existing dataset's (its stored sketches, never its data
     files). ``sketches``: the new episodes' merged sketches (:func:`load_episode_stats`). Returns the
-    dataset's merged sketches (the fleet distribution the jump check judges by)."""
+    dataset's merged sketches (the fleet distribution the jump check judges by). ``episode_stats`` may
+    be a stream: each episode's stats are written as its row and kept only as numbers for the merge."""
+    parts = StatsParts()
+
+    def kept(stream: Iterable[EpisodeStats]) -> Iterator[EpisodeStats]:
+        for ep in stream:
+            parts.add(ep.stats, ep.histograms)
+            yield ep
+
     first_episode = base.episodes if base is not None else 0
     (root / "meta").mkdir(parents=True, exist_ok=True)
     (root / INFO_PATH).write_text(json.dumps(info, indent=4))
@@ -219,42 +271,15 @@ def write_meta(
     task_frame.to_parquet(root / TASKS_PATH)
 
     stat_keys = [f.key for f in features] + list(DEFAULT_FEATURES)
-    rows = []
-    for n, (summary, placement, ep_stats) in enumerate(zip(summaries, data, episode_stats, strict=True)):
-        row: dict[str, Any] = {
-            "episode_index": first_episode + n,
-            "tasks": list(summary.tasks),
-            "length": summary.frames,
-            "data/chunk_index": placement.chunk_index,
-            "data/file_index": placement.file_index,
-            "dataset_from_index": placement.from_index,
-            "dataset_to_index": placement.to_index,
-            "label": summary.label,
-            "label_note": summary.note,
-        }
-        for key, placed in videos.items():
-            video = placed[n]
-            row[f"videos/{key}/chunk_index"] = video.chunk_index
-            row[f"videos/{key}/file_index"] = video.file_index
-            row[f"videos/{key}/from_timestamp"] = video.from_timestamp_s
-            row[f"videos/{key}/to_timestamp"] = video.to_timestamp_s
-        row.update(_stat_columns(ep_stats.stats, stat_keys))
-        rows.append(row)
-    table = pa.Table.from_pylist(rows)
-    for name in _LABEL_COLUMNS:  # typed even when every episode's label is null
-        table = table.set_column(
-            table.schema.get_field_index(name), name, table.column(name).cast(pa.string())
-        )
-    if base is not None and not _has_label_columns(root):
-        table = table.drop_columns(list(_LABEL_COLUMNS))  # LeRobot loads episode files of one schema only
+    tables = _episode_tables(summaries, data, videos, kept(episode_stats), stat_keys, first_episode, base)
     write_episode_files(
         root,
-        table,
+        tables,
         start=base.next_episodes if base is not None else (0, 0),
         file_size_in_mb=float(info["data_files_size_in_mb"]),
         chunks_size=int(info["chunks_size"]),
     )
-    return _write_stats(root, features, stat_keys, episode_stats, sketches, base)
+    return _write_stats(root, features, stat_keys, parts, sketches, base)
 
 
 def _base_sketches(base: DatasetBase, keys: Sequence[str]) -> DatasetSketches:
@@ -267,7 +292,7 @@ def _write_stats(
     root: Path,
     features: Sequence[StagedFeature],
     stat_keys: Sequence[str],
-    episode_stats: Sequence[EpisodeStats],
+    parts: StatsParts,
     sketches: DatasetSketches,
     base: DatasetBase | None,
 ) -> DatasetSketches:
@@ -278,17 +303,20 @@ def _write_stats(
     histograms: dict[str, list[int]] = {}
     levels = {f.key: histogram_levels(f.video_info) for f in features if f.video_info is not None}
     for key in stat_keys:
-        parts = [ep.stats[key] for ep in episode_stats]
-        if base is not None:
-            parts.append(base.stats[key])
-        if all(key in ep.histograms for ep in episode_stats) and (base is None or key in base.histograms):
-            hists = [ep.histograms[key] for ep in episode_stats]
-            if base is not None:
-                hists.append(base.histograms[key])
-            value = merge_histograms(hists, [int(p["count"][0]) for p in parts], levels.get(key))
-            histograms[key] = np.sum(np.stack(hists), axis=0).tolist()
+        stacked = parts.stacked(key)
+        if base is not None:  # the existing dataset's stats: one more part, the last
+            stacked = {
+                s: np.concatenate([v, np.asarray(base.stats[key][s])[None]]) for s, v in stacked.items()
+            }
+        hist = parts.histogram(key)
+        if hist is not None and (base is None or key in base.histograms):
+            total = hist if base is None else hist + base.histograms[key]
+            value = histogram_stats(
+                total, int(stacked["count"][:, 0].astype(np.int64).sum()), levels.get(key)
+            )
+            histograms[key] = total.tolist()
         else:
-            value = merge_feature_stats(parts)
+            value = merge_stacked_stats(stacked)
             if key in sketches.values:  # merged sketches, within the bound of bagport.stats.sketch
                 shape = np.shape(value["min"])
                 value.update({q: v.reshape(shape) for q, v in sketches.values[key].quantiles().items()})
@@ -305,43 +333,47 @@ def _write_stats(
 
 
 def write_episode_files(
-    root: Path, table: pa.Table, *, start: tuple[int, int], file_size_in_mb: float, chunks_size: int
+    root: Path,
+    tables: Iterable[pa.Table],
+    *,
+    start: tuple[int, int],
+    file_size_in_mb: float,
+    chunks_size: int,
 ) -> list[tuple[int, int]]:
-    """Write the episode rows from file ``start`` on, rotating by size as LeRobot's writer does: rows go
-    in batches of :data:`EPISODES_BATCH`, and a new file starts when the current one's size plus the
-    batch's estimated size (the file's average bytes per row so far) would reach ``file_size_in_mb``
-    (LeRobot uses ``data_files_size_in_mb`` for its episodes files too). Returns the files written."""
+    """Write the episode rows (``tables``, in order, of one schema) from file ``start`` on, rotating by size
+    as LeRobot's writer does: rows go in batches of :data:`EPISODES_BATCH`, and a new file starts when the
+    current one's size plus the batch's estimated size (the file's average bytes per row so far) would
+    reach ``file_size_in_mb`` (LeRobot uses ``data_files_size_in_mb`` for its episodes files too).
+    Returns the files written."""
     limit_bytes = file_size_in_mb * 1024 * 1024
     chunk_file = start
     written = [chunk_file]
     rows_in_file = 0
     writer: pq.ParquetWriter | None = None
     path = root / EPISODES_PATH.format(chunk_index=chunk_file[0], file_index=chunk_file[1])
-    first = table.num_columns
     columns = {"meta/episodes/chunk_index": pa.int64(), "meta/episodes/file_index": pa.int64()}
-    schema = table.schema
-    for name, kind in columns.items():
-        schema = schema.append(pa.field(name, kind))
     try:
-        for offset in range(0, table.num_rows, EPISODES_BATCH):
-            batch = table.slice(offset, EPISODES_BATCH)
-            if writer is not None and rows_in_file:
-                size = path.stat().st_size
-                if size + size / rows_in_file * batch.num_rows >= limit_bytes:
-                    writer.close()
-                    writer, rows_in_file = None, 0
-                    chunk_file = next_chunk_file(*chunk_file, chunks_size)
-                    written.append(chunk_file)
-            if writer is None:
-                path = root / EPISODES_PATH.format(chunk_index=chunk_file[0], file_index=chunk_file[1])
-                path.parent.mkdir(parents=True, exist_ok=True)
-                writer = pq.ParquetWriter(path, schema)
-            for n, name in enumerate(columns):
-                batch = batch.add_column(
-                    first + n, name, pa.array([chunk_file[n]] * batch.num_rows, pa.int64())
-                )
-            writer.write_table(batch)
-            rows_in_file += batch.num_rows
+        for table in tables:
+            for offset in range(0, table.num_rows, EPISODES_BATCH):
+                batch = table.slice(offset, EPISODES_BATCH)
+                if writer is not None and rows_in_file:
+                    size = path.stat().st_size
+                    if size + size / rows_in_file * batch.num_rows >= limit_bytes:
+                        writer.close()
+                        writer, rows_in_file = None, 0
+                        chunk_file = next_chunk_file(*chunk_file, chunks_size)
+                        written.append(chunk_file)
+                first = batch.num_columns
+                for n, (name, kind) in enumerate(columns.items()):
+                    batch = batch.add_column(
+                        first + n, name, pa.array([chunk_file[n]] * batch.num_rows, kind)
+                    )
+                if writer is None:
+                    path = root / EPISODES_PATH.format(chunk_index=chunk_file[0], file_index=chunk_file[1])
+                    path.parent.mkdir(parents=True, exist_ok=True)
+                    writer = pq.ParquetWriter(path, batch.schema)
+                writer.write_table(batch)
+                rows_in_file += batch.num_rows
     finally:
         if writer is not None:
             writer.close()

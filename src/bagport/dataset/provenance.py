@@ -10,7 +10,7 @@ grid start/end per episode, bagport version and encoder settings.
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +24,7 @@ from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, PROVENANCE_PATH, RUN_RECORD_PATH
 from bagport.staging import PROVENANCE_FILE, EpisodeSummary
 
-__all__ = ["episode_provenance", "run_record_path", "write_provenance"]
+__all__ = ["episode_provenance", "run_record_path", "write_provenance", "write_run_record"]
 
 
 def run_record_path(base: DatasetBase | None) -> str:
@@ -66,8 +66,11 @@ def write_provenance(
     data: Sequence[DataPlacement],
     run_record: dict[str, Any],
     base: DatasetBase | None = None,
+    *,
+    record: bool = True,
 ) -> None:
-    """Write this run's provenance rows and run record; an append adds a new file and ``run-NNN.json``."""
+    """Write this run's provenance rows and (with ``record``) run record; an append adds a new file and
+    ``run-NNN.json``. Without ``record`` the caller writes the record later (:func:`write_run_record`)."""
     first_episode = base.episodes if base is not None else 0
     chunk, file = base.next_provenance if base is not None else (0, 0)
     path = root / PROVENANCE_PATH.format(chunk_index=chunk, file_index=file)
@@ -93,6 +96,29 @@ def write_provenance(
     finally:
         if writer is not None:
             writer.close()
-    episodes = [episode_provenance(s, i) for i, s in enumerate(summaries, first_episode)]
-    record = {**run_record, "episodes": episodes}
-    (root / run_record_path(base)).write_text(json.dumps(record, indent=2, default=str))
+    if record:
+        episodes = (episode_provenance(s, i) for i, s in enumerate(summaries, first_episode))
+        write_run_record(root / run_record_path(base), run_record, episodes, {})
+
+
+def _nested(value: Any, level: int) -> str:
+    return json.dumps(value, indent=2, default=str).replace("\n", "\n" + "  " * level)
+
+
+def write_run_record(
+    path: Path, record: dict[str, Any], episodes: Iterable[dict[str, Any]], tail: dict[str, Any]
+) -> None:
+    """Write ``json.dumps({**record, "episodes": [...], **tail}, indent=2, default=str)``, one episode's
+    entry at a time (memory stays flat in the number of episodes)."""
+    with path.open("w", encoding="utf-8") as out:
+        out.write("{")
+        for n, (key, value) in enumerate([*record.items(), ("episodes", None), *tail.items()]):
+            out.write(("\n" if n == 0 else ",\n") + f"  {json.dumps(key)}: ")
+            if key != "episodes" or value is not None:
+                out.write(_nested(value, 1))
+                continue
+            count = 0
+            for count, entry in enumerate(episodes, 1):
+                out.write(("[\n    " if count == 1 else ",\n    ") + _nested(entry, 2))
+            out.write("\n  ]" if count else "[]")
+        out.write("\n}")

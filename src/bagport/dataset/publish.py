@@ -9,7 +9,8 @@ folder while it lives.
   Where the exchange is unsupported (not Linux, or a file system without it) two renames are the
   fallback: ``X`` -> ``.X.old-<hex>``, build -> ``X``; a crash between them leaves ``X`` missing
   for a moment, and recovery renames the old one back.
-- **Append**: the new data/video files and the new ``meta/`` are built; the intent record
+- **Append**: the new data/video files and the ``meta/`` files the append writes are built; the
+  other ``meta/`` files are hard-linked in (never read or copied); the intent record
   (:mod:`bagport.dataset.journal`) is written into ``X``; the new files are moved in (new names:
   no old file is touched, and LeRobot, which counts frames from ``meta/``, ignores rows past
   ``total_frames``); then ``X/meta`` and the new ``meta/`` are exchanged, the commit point.
@@ -235,9 +236,20 @@ def _move_in(source: Path, target: Path) -> None:
     source.rename(target)
 
 
+def _link_unchanged(current: Path, new: Path) -> None:
+    """Hard-link into ``new`` every file of ``current`` the append did not write (no byte is read or
+    copied; the new ``meta/`` then is whole, and the exchange swaps whole folders)."""
+    for path in sorted(current.rglob("*")):
+        target = new / path.relative_to(current)
+        if path.is_file() and not target.exists():
+            target.parent.mkdir(parents=True, exist_ok=True)
+            os.link(path, target)
+
+
 def commit_append(build: Path, final: Path, added: Sequence[str]) -> None:
     """Move the new files ``added`` (relative paths) from ``build`` into ``final`` and exchange ``meta/``,
     under the intent record (see the module docstring). ``build/meta`` then holds the old ``meta/``."""
+    _link_unchanged(final / "meta", build / "meta")
     reached("local.append.built")
     for rel in added:
         if (final / rel).exists():

@@ -23,6 +23,7 @@ from typing import Any
 
 import pyarrow as pa
 import pyarrow.parquet as pq
+from fsspec.core import url_to_fs
 
 from bagport.dataset.meta import EpisodeStats
 from bagport.dataset.sketches import DatasetSketches
@@ -123,14 +124,16 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
     return pa.table(rows, schema=QA_SCHEMA)
 
 
-def _migrate_legacy_summary(root: Path, run_number: int) -> None:
+def _migrate_legacy_summary(root: Path, run_number: int, previous: str) -> None:
     """A dataset written before the QA index existed: its ``summary.json`` (every earlier run's episodes)
     becomes ``index/run-000.parquet``, once (their checks lists are not known: empty)."""
-    summary_path = root / QA_SUMMARY_PATH
+    fs, before = url_to_fs(previous)
+    summary_path = f"{before}/{QA_SUMMARY_PATH}"
     legacy_path = root / QA_INDEX_PATH.format(run=0)
-    if not run_number or legacy_path.is_file() or not summary_path.is_file():
+    if not run_number or fs.isfile(f"{before}/{QA_INDEX_PATH.format(run=0)}") or not fs.isfile(summary_path):
         return
-    legacy = json.loads(summary_path.read_text()).get("episodes", [])
+    with fs.open(summary_path, "r", encoding="utf-8") as handle:
+        legacy = json.load(handle).get("episodes", [])
     rows = [
         {**{k: e.get(k) for k in _BRIEF_KEYS}, "run": 0, "position": n, "name": str(e["bag_uri"]).rsplit("/", 1)[-1],
          "robot_type": "", "folder": str(e["bag_uri"]).rsplit("/", 1)[0], "day": "unknown",
@@ -139,6 +142,25 @@ def _migrate_legacy_summary(root: Path, run_number: int) -> None:
     ]  # fmt: skip
     legacy_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(pa.Table.from_pylist(rows, schema=INDEX_SCHEMA), legacy_path, compression="zstd")
+
+
+def _index_tables(root: Path, previous: str | None) -> list[pa.Table]:
+    """Every run's QA index, in run order: this run's (under ``root``) and the earlier ones (``previous``)."""
+    mine = {p.name: p for p in (root / "meta/qa/index").glob("run-*.parquet")}
+    fs, before = url_to_fs(previous or str(root))
+    theirs = {
+        name: str(path)
+        for path in fs.glob(f"{before.rstrip('/')}/meta/qa/index/run-*.parquet")
+        if (name := str(path).rsplit("/", 1)[-1]) not in mine
+    }
+    tables = []
+    for name in sorted([*mine, *theirs]):
+        if name in mine:
+            tables.append(pq.read_table(mine[name], schema=INDEX_SCHEMA))
+            continue
+        with fs.open(theirs[name], "rb") as handle:
+            tables.append(pq.read_table(handle, schema=INDEX_SCHEMA))
+    return tables
 
 
 def write_qa(
@@ -150,13 +172,16 @@ def write_qa(
     *,
     robot_type: str = "",
     names: Names | None = None,
+    previous: str | None = None,
 ) -> str:
     """Write this run's QA table, index and detail pages under ``root/meta/qa``, then rebuild the summary
-    and the fleet report over every run from the index files. Returns the report's path in the dataset."""
+    and the fleet report over every run from the index files (the earlier runs' at ``previous``, the
+    dataset's root as a path or URI, when this run builds its ``meta/`` apart from it; default ``root``).
+    Returns the report's path in the dataset."""
     table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
     table_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(qa_rows(entries), table_path, compression="zstd")
-    _migrate_legacy_summary(root, run_number)
+    _migrate_legacy_summary(root, run_number, previous or str(root))
     index = index_table(entries, run_number, robot_type)
     index_path = root / QA_INDEX_PATH.format(run=run_number)
     index_path.parent.mkdir(parents=True, exist_ok=True)
@@ -168,9 +193,7 @@ def write_qa(
             page.parent.mkdir(parents=True, exist_ok=True)
             html = render_episode_page(entry, names, int(fps) if fps else None, "../../report.html")
             page.write_text(html, encoding="utf-8")
-    whole = pa.concat_tables(
-        pq.read_table(p, schema=INDEX_SCHEMA) for p in sorted((root / "meta/qa/index").glob("run-*.parquet"))
-    )
+    whole = pa.concat_tables(_index_tables(root, previous))
     episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in whole.select(list(_BRIEF_KEYS)).to_pylist()]
     summary = {
         "episodes": episodes,

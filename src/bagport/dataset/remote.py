@@ -26,20 +26,18 @@ from __future__ import annotations
 
 import json
 import uuid
-from collections.abc import Callable, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
-from bagport.dataset.base import DatasetBase, read_base
 from bagport.dataset.crashpoints import reached
 from bagport.dataset.journal import Journal, file_sha256, read_journal, remove_journal, write_journal
 from bagport.dataset.layout import INFO_PATH, STAGED_DIR
-from bagport.dataset.meta import DatasetLimits
 from bagport.errors import DatasetWriteError
 
-__all__ = ["append_remote", "publish_remote", "recover_remote"]
+__all__ = ["drop_staged", "publish_remote", "publish_staged", "recover_remote"]
 
 _LEGACY_JOURNAL = ".append-journal.json"
 
@@ -146,40 +144,59 @@ def _files(folder: Path, under: str) -> list[str]:
     )
 
 
-def _download_meta(fs: AbstractFileSystem, root: str, local: Path) -> dict[str, str]:
-    """Copy the dataset's ``meta/`` to ``local``; returns each file's digest."""
-    digests = {}
-    for remote in fs.find(f"{root}/meta"):
-        rel = remote[len(root) + 1 :]
-        target = local / rel
-        target.parent.mkdir(parents=True, exist_ok=True)
-        fs.get_file(remote, str(target))
-        digests[rel] = file_sha256(target)
-    return digests
-
-
-def append_remote[Report](
-    output: str, build: Callable[[Path, DatasetBase, DatasetLimits], Report], scratch: Path
-) -> Report:
-    """Append to the dataset at ``output``: ``build(root, base, limits)`` writes the new episodes'
-    files and the new ``meta/`` under a local ``root`` (in ``scratch``) holding a copy of its ``meta/``."""
+def drop_staged(output: str, staged: str) -> None:
+    """Remove the uploads under ``staged`` and their ``staged`` record, if that write never committed
+    (a write that committed, or is committing, is left alone)."""
     fs, root = url_to_fs(output)
     root = root.rstrip("/")
-    recover_remote(output)
-    base = read_base(output)
-    local = scratch / "dataset"
-    before = _download_meta(fs, root, local)
-    report = build(local, base, DatasetLimits.from_info(base.info))
-    added = _files(local, "data") + _files(local, "videos")
-    for rel in added:
+    fs.invalidate_cache()
+    journal = read_journal(fs, root)
+    if journal is None or journal.staged != staged or journal.state != "staged":
+        return
+    if fs.exists(f"{root}/{staged}"):
+        fs.rm(f"{root}/{staged}", recursive=True)
+    remove_journal(fs, root)
+
+
+def _removed(fs: AbstractFileSystem, root: str, keep: set[str]) -> list[str]:
+    """The previous version's files a replacing write does not have (bagport's own hidden keys aside)."""
+    existing = {p[len(root) + 1 :] for p in fs.find(root)} if fs.exists(root) else set()
+    return sorted(rel for rel in existing - keep if not rel.startswith(".bagport-"))
+
+
+def publish_staged(
+    local: Path, output: str, staged: str, written: Mapping[str, str], *, append: bool
+) -> None:
+    """Commit a write whose data and video files (``written``: relative path -> digest) the file writers
+    uploaded under ``<root>/<staged>/`` already: upload the ``meta/`` built in ``local`` there too, record
+    every file (and, replacing a dataset, the previous version's files to remove), then commit (see the
+    module docstring). Old objects an append does not change stay where they are, unread."""
+    fs, root = url_to_fs(output)
+    root = root.rstrip("/")
+    fs.invalidate_cache()
+    reached("s3.files")
+    meta = [rel for rel in _files(local, "meta") if rel != INFO_PATH] + [INFO_PATH]
+    for rel in written if append else ():
         if fs.exists(f"{root}/{rel}"):
             raise DatasetWriteError(
                 f"{output}/{rel} exists already: the dataset changed during the append; nothing was written. "
                 "Fix: run the append again (one append at a time per dataset)."
             )
-    changed = [rel for rel in _files(local, "meta") if before.get(rel) != file_sha256(local / rel)]
-    publish_remote(local, output, added + changed, append=True)
-    return report
+    remove = () if append else tuple(_removed(fs, root, {*written, *meta}))
+    reached("s3.built")
+    journal = Journal(
+        op="append" if append else "publish", staged=staged, files=(*sorted(written), *meta), remove=remove,
+        info_sha256=file_sha256(local / INFO_PATH),
+    )  # fmt: skip
+    for n, rel in enumerate(meta):
+        _upload(fs, local / rel, f"{root}/{staged}/{rel}")
+        if n == 0:
+            reached("s3.staging")
+    write_journal(fs, root, journal)
+    reached("s3.staged")
+    write_journal(fs, root, journal.committing())
+    reached("s3.committing")
+    _roll_forward(fs, root, journal)
 
 
 def _upload(fs: AbstractFileSystem, local: Path, remote: str) -> None:

@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-import pandas as pd
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
@@ -38,8 +37,9 @@ def _unreferenced_tail(root: Path) -> list[Path]:
     files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
     if not files:
         return []
-    where = [c for c in pq.read_schema(files[0]).names if c.endswith(("/chunk_index", "/file_index"))]
-    episodes = pd.concat([pq.read_table(p, columns=where).to_pandas() for p in files])
+    newest = pq.ParquetFile(files[-1])  # the last data/video files are the last episodes' (rows go in order)
+    where = [c for c in newest.schema_arrow.names if c.endswith(("/chunk_index", "/file_index"))]
+    episodes = newest.read_row_group(newest.num_row_groups - 1, columns=where).to_pandas()
     tails = []
     for column in [c[: -len("/chunk_index")] for c in episodes.columns if c.endswith("/chunk_index")]:
         if column == "meta/episodes":

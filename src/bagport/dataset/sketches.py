@@ -16,6 +16,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pyarrow.parquet as pq
@@ -49,6 +50,18 @@ class DatasetSketches:
             "steps": {key: s.to_json() for key, s in self.steps.items()},
         }
 
+    @classmethod
+    def from_json(cls, raw: dict[str, Any]) -> DatasetSketches:
+        return cls(
+            {key: VectorSketch.from_json(v) for key, v in raw.get("values", {}).items()},
+            {key: VectorSketch.from_json(v) for key, v in raw.get("steps", {}).items()},
+        )
+
+    def __reduce__(self) -> tuple[Any, tuple[dict[str, Any]]]:
+        """Pickled as its JSON form (the sketches themselves are C++ objects): a write session carries the
+        dataset's sketches to the commit, in another process."""
+        return (DatasetSketches.from_json, (self.to_json(),))
+
     def write(self, root: Path) -> None:
         path = root / SKETCHES_PATH
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -62,10 +75,7 @@ def read_sketches(fs: AbstractFileSystem, root: str) -> DatasetSketches | None:
         return None
     with fs.open(path, "r", encoding="utf-8") as handle:
         raw = json.load(handle)
-    return DatasetSketches(
-        {key: VectorSketch.from_json(v) for key, v in raw.get("values", {}).items()},
-        {key: VectorSketch.from_json(v) for key, v in raw.get("steps", {}).items()},
-    )
+    return DatasetSketches.from_json(raw)
 
 
 def sketches_from_data_files(data_files: Sequence[str], keys: Sequence[str]) -> DatasetSketches:

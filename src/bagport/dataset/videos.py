@@ -8,13 +8,12 @@ from pathlib import Path
 
 from fsspec.core import url_to_fs
 
-from bagport.dataset.layout import VIDEO_PATH, next_chunk_file
+from bagport.dataset.layout import next_chunk_file
 from bagport.scratch import scratch_folder
-from bagport.staging import EpisodeSummary
 from bagport.uris import is_local
 from bagport.video import concat_clips
 
-__all__ = ["VideoPlacement", "write_video_files"]
+__all__ = ["VideoPlacement", "plan_video_files", "write_video_file"]
 
 _MB = 1024 * 1024
 
@@ -27,59 +26,46 @@ class VideoPlacement:
     to_timestamp_s: float
 
 
-def _local_clip(uri: str, scratch: Path, name: str) -> tuple[Path, int]:
-    fs, path = url_to_fs(uri)
-    size = int(fs.size(path))
-    if is_local(fs):
-        return Path(path), size
-    local = scratch / name
-    fs.get_file(path, str(local))
-    return local, size
-
-
-def write_video_files(
-    root: Path,
-    key: str,
-    summaries: Sequence[EpisodeSummary],
-    *,
-    fps: int,
-    file_size_in_mb: float,
-    chunks_size: int,
-    start: tuple[int, int] = (0, 0),
-) -> list[VideoPlacement]:
-    """Group clips into files (at least one clip each) and remux; a file rotates as LeRobot's writer rotates
-    it, when its size plus the next clip's reaches ``file_size_in_mb``.
-
-    ``start`` (chunk, file): where the first new file goes (after the last one, for an append).
-    """
-    placements: list[VideoPlacement] = []
-    chunk, file = start
+def plan_video_files(
+    clip_sizes: Sequence[int], *, file_size_in_mb: float, chunks_size: int, start: tuple[int, int] = (0, 0)
+) -> list[tuple[tuple[int, int], list[int]]]:
+    """Group clips (by their sizes, in order) into files: ((chunk, file), positions) each, at least one
+    clip a file. A file rotates as LeRobot's writer rotates it, when its size plus the next clip's
+    reaches ``file_size_in_mb``; ``start``: where the first new file goes (after the last one, for an
+    append)."""
     limit = file_size_in_mb * _MB
-    with scratch_folder("clips") as tmp:
-        scratch = Path(tmp)
-        group: list[Path] = []
-        group_bytes = 0
-
-        def flush() -> None:
-            nonlocal chunk, file, group, group_bytes
-            out = root / VIDEO_PATH.format(video_key=key, chunk_index=chunk, file_index=file)
-            out.parent.mkdir(parents=True, exist_ok=True)
-            placements.extend(
-                VideoPlacement(chunk, file, placed.from_timestamp_s, placed.to_timestamp_s)
-                for placed in concat_clips(group, out, fps=fps)
-            )
-            for clip in group:
-                if clip.is_relative_to(scratch):
-                    clip.unlink()
-            chunk, file = next_chunk_file(chunk, file, chunks_size)
+    groups: list[tuple[tuple[int, int], list[int]]] = []
+    where = start
+    group: list[int] = []
+    group_bytes = 0
+    for n, size in enumerate(clip_sizes):
+        if group and group_bytes + size >= limit:  # LeRobot's test, on clip sizes
+            groups.append((where, group))
+            where = next_chunk_file(*where, chunks_size)
             group, group_bytes = [], 0
+        group.append(n)
+        group_bytes += size
+    if group:
+        groups.append((where, group))
+    return groups
 
-        for n, summary in enumerate(summaries):
-            clip, size = _local_clip(summary.file(summary.videos[key]), scratch, f"{n:06d}.mp4")
-            if group and group_bytes + size >= limit:  # LeRobot's test, on clip sizes
-                flush()
-            group.append(clip)
-            group_bytes += size
-        if group:
-            flush()
-    return placements
+
+def write_video_file(
+    out: Path, clips: Sequence[str], *, fps: int, chunk_file: tuple[int, int]
+) -> list[VideoPlacement]:
+    """Remux the staged clips (URIs, in order) into ``out``; one placement per clip. A clip on an object
+    store is downloaded into a scratch folder first, one at a time (memory stays flat)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    with scratch_folder("clips") as tmp:
+        local: list[Path] = []
+        for n, uri in enumerate(clips):
+            fs, path = url_to_fs(uri)
+            if is_local(fs):
+                local.append(Path(path))
+            else:
+                local.append(Path(tmp) / f"{n:06d}.mp4")
+                fs.get_file(path, str(local[-1]))
+        return [
+            VideoPlacement(*chunk_file, placed.from_timestamp_s, placed.to_timestamp_s)
+            for placed in concat_clips(local, out, fps=fps)
+        ]

@@ -2,7 +2,13 @@
 
 from __future__ import annotations
 
-from bagport.stats.merge import merge_feature_stats, merge_histograms, stats_from_json, stats_to_json
+from bagport.stats.merge import (
+    merge_feature_stats,
+    merge_histograms,
+    merge_stacked_stats,
+    stats_from_json,
+    stats_to_json,
+)
 from bagport.stats.numeric import (
     QUANTILES,
     STAT_KEYS,
@@ -24,6 +30,7 @@ __all__ = [
     "histogram_stats",
     "merge_feature_stats",
     "merge_histograms",
+    "merge_stacked_stats",
     "rank_error",
     "stats_from_json",
     "stats_to_json",

@@ -17,26 +17,38 @@ import numpy.typing as npt
 
 from bagport.stats.numeric import QUANTILES, FeatureStats, histogram_stats
 
-__all__ = ["merge_feature_stats", "merge_histograms", "stats_from_json", "stats_to_json"]
+__all__ = [
+    "merge_feature_stats",
+    "merge_histograms",
+    "merge_stacked_stats",
+    "stats_from_json",
+    "stats_to_json",
+]
 
 
 def merge_feature_stats(parts: Sequence[FeatureStats]) -> FeatureStats:
-    counts = np.array([int(p["count"][0]) for p in parts], dtype=np.float64)
+    needed = ("min", "max", "mean", "std", "count", *QUANTILES)
+    return merge_stacked_stats({stat: np.stack([p[stat] for p in parts]) for stat in needed})
+
+
+def merge_stacked_stats(stacked: dict[str, npt.NDArray[Any]]) -> FeatureStats:
+    """:func:`merge_feature_stats` of parts given as one stacked array per statistic (parts along axis 0)."""
+    counts = stacked["count"][:, 0].astype(np.int64).astype(np.float64)
     total = counts.sum()
-    means = np.stack([p["mean"] for p in parts])
-    variances = np.stack([p["std"] for p in parts]) ** 2
+    means = stacked["mean"]
+    variances = stacked["std"] ** 2
     weights = counts.reshape((-1,) + (1,) * (means.ndim - 1))
     mean = (means * weights).sum(axis=0) / total
     var = ((variances + (means - mean) ** 2) * weights).sum(axis=0) / total
     merged: FeatureStats = {
-        "min": np.min(np.stack([p["min"] for p in parts]), axis=0),
-        "max": np.max(np.stack([p["max"] for p in parts]), axis=0),
+        "min": np.min(stacked["min"], axis=0),
+        "max": np.max(stacked["max"], axis=0),
         "mean": mean,
         "std": np.sqrt(var),
         "count": np.array([int(total)], dtype=np.int64),
     }
     for key in QUANTILES:
-        merged[key] = (np.stack([p[key] for p in parts]) * weights).sum(axis=0) / total
+        merged[key] = (stacked[key] * weights).sum(axis=0) / total
     return merged
 
 

@@ -19,7 +19,8 @@ from bagport.contract import parse_contract
 from bagport.episode import convert_episode
 from bagport.errors import BagReadError
 from bagport.feature_table import describe_features
-from bagport.run import plan_run, reduce_run, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, stage_all
 from bagport.staging import read_summary
 from flows.cli import main
 from tests.bagport.decode.bagwriter import write_bag

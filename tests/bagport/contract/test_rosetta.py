@@ -15,7 +15,8 @@ from rosbags.typesys import Stores, get_typestore
 from bagport.config import ConvertConfig
 from bagport.contract import FeatureKind, parse_contract
 from bagport.dataset.validate import validate_dataset
-from bagport.run import plan_run, reduce_run, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, stage_all
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.bagport.decode.bagwriter import Stream, write_bag
 

@@ -11,9 +11,11 @@ import pytest
 
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
+from bagport.dataset.journal import file_sha256
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import DatasetWriteError
-from bagport.run import plan_run, reduce_run, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -146,6 +148,10 @@ def test_append_to_a_dataset_without_label_columns_keeps_one_episodes_schema(
     episodes_file = out / "meta/episodes/chunk-000/file-000.parquet"
     older = pq.read_table(episodes_file).drop_columns(["label", "label_note"])  # as bagport wrote it before
     pq.write_table(older, episodes_file)
+    record = out / "meta/provenance/run.json"  # and recorded its digest (an append carries digests over)
+    files = json.loads(record.read_text())
+    files["files"]["meta/episodes/chunk-000/file-000.parquet"] = file_sha256(episodes_file)
+    record.write_text(json.dumps(files))
     assert _convert(bags, ["a", "b"], out, append=True) == 1
     assert "label" not in pq.read_schema(out / "meta/episodes/chunk-000/file-001.parquet").names
     assert validate_dataset(out, repo_id="test/append", decode_every=10).episodes == 2

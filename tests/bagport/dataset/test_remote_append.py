@@ -13,7 +13,8 @@ import bagport.dataset.remote
 from bagport.config import ConvertConfig
 from bagport.dataset.remote import recover_remote
 from bagport.dataset.validate import validate_dataset
-from bagport.run import plan_run, reduce_run, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 

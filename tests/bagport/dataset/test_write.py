@@ -228,11 +228,11 @@ def test_a_failure_mid_build_keeps_the_previous_dataset_loadable(
     shutil.copytree(previous, out)
     before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
 
-    def encoder_dies(root: Path, *args: object, **kwargs: object) -> None:
-        assert list(root.glob("data/chunk-*/file-*.parquet"))  # the data files are written already
+    def encoder_dies(out: Path, *args: object, **kwargs: object) -> None:
+        assert list(out.parents[3].glob("data/chunk-*/file-*.parquet"))  # the data files are written already
         raise RuntimeError("encoder died")
 
-    monkeypatch.setattr("bagport.dataset.write.write_video_files", encoder_dies)
+    monkeypatch.setattr("bagport.dataset.files.write_video_file", encoder_dies)
     with pytest.raises(RuntimeError, match="encoder died"):
         write_dataset(staged, str(out), robot_type="r", overwrite=True)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]  # no build folder left behind

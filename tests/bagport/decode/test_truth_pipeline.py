@@ -15,7 +15,8 @@ from bagport.config import ConvertConfig
 from bagport.contract import parse_contract
 from bagport.dataset.validate import validate_dataset
 from bagport.feature_table import describe_features
-from bagport.run import plan_run, reduce_run, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, stage_all
 from tests.bagport.decode.bagwriter import Stream, write_bag
 
 pytestmark = pytest.mark.slow

@@ -12,7 +12,8 @@ from bagport.episode import convert_episode
 from bagport.episode.tasks import OPERATOR_PROMPT_KEY, resolve_tasks
 from bagport.episode.timeline import TaskMessage
 from bagport.errors import ManifestError
-from bagport.run import PlannedEpisode, plan_run, reduce_run
+from bagport.reduce import reduce_run
+from bagport.run import PlannedEpisode, plan_run
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import episode_request
 

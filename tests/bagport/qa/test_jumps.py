@@ -13,7 +13,8 @@ import pytest
 from bagport.config import ConvertConfig
 from bagport.qa import QAConfig
 from bagport.qa.jumps import step_outlier_checks
-from bagport.run import plan_run, reduce_run, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, stage_all
 from bagport.stats import VectorSketch
 from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT

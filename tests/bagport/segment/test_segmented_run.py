@@ -18,7 +18,8 @@ from bagport.bags import BagReader, open_bag
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
-from bagport.run import plan_run, reduce_run, segment_all, stage_all
+from bagport.reduce import reduce_run
+from bagport.run import plan_run, segment_all, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, Window, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 

@@ -1,0 +1,261 @@
+"""The reduce as a map (issue 15): what an append costs against the size of the dataset, what a second Dask
+worker gives the reduce, and whether the commit's memory stays flat with the number of episodes.
+
+- ``append``: 20 new one-second episodes (W4's shape) appended to a dataset of 100 and of 2,000 episodes
+  (built from the same staged episodes, repeated): wall seconds of the append, and how many times it
+  opened or read an existing data or video file (inotify on every one of them: 0 opens is 0 bytes read).
+- ``commit``: the commit step alone (``bagport.dataset.commit.commit_write``: ``meta/``, QA, provenance,
+  checksums, publish) for a 100- and a 2,000-episode write, in a fresh process: its peak RSS (VmHWM).
+- ``dask``: the reduce of W1 (8 x 30 s, three 640x480 cameras; staged once) on a local Dask cluster of
+  1 and of 2 worker processes: open the write, one ``write_planned_file`` per output file on the
+  workers, then the commit; wall seconds.
+
+The machine is shared: every figure comes with the 1-minute load average when it was taken.
+Usage: python bench/reduce_map.py [--parts append,commit,dask] [--data DIR] [--report BENCHMARKS.md]
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+import json
+import os
+import pickle
+import shutil
+import subprocess
+import sys
+import time
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+from bagport.dataset import write_dataset  # noqa: E402
+from bagport.dataset.commit import commit_write  # noqa: E402
+from bagport.dataset.files import write_planned_file  # noqa: E402
+from bagport.dataset.session import open_write  # noqa: E402
+from bagport.episode import EpisodeRequest, convert_episode, episode_id_for  # noqa: E402
+from bagport.staging import EpisodeSummary  # noqa: E402
+from bench.report import write_section  # noqa: E402
+from bench.workloads import WORKLOADS, ensure_workload  # noqa: E402
+
+CODEC = yaml.safe_load((REPO / "configs/codecs/h264-fast.yaml").read_text())
+NEW = 20
+
+
+def _probe() -> Any:
+    """tests/fsprobe.py (inotify), loaded by path: the ``tests`` name may belong to an installed package."""
+    spec = importlib.util.spec_from_file_location("fsprobe", REPO / "tests/fsprobe.py")
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def _load() -> float:
+    return os.getloadavg()[0]
+
+
+def _stage_one(args: tuple[Path, str, str, int]) -> EpisodeSummary:
+    folder, name, contract, entry = args
+    bag = str(folder / name)
+    request = EpisodeRequest(
+        episode_id_for(bag, contract, CODEC), bag, entry, str(folder / "staging"), contract, "bench", CODEC
+    )
+    return convert_episode(request)
+
+
+def stage(workload: str, data: Path, episodes: int | None = None) -> list[EpisodeSummary]:
+    """The workload's bags (generated once), converted into a staging store beside them (two at a time)."""
+    spec = WORKLOADS[workload]
+    if episodes is not None:
+        spec = spec.scaled(episodes / spec.episodes)
+    folder = ensure_workload(spec, data, workers=2)
+    names = [e["uri"] for e in yaml.safe_load((folder / "manifest.yaml").read_text())["bags"]]
+    contract = (folder / "contract.yaml").read_text()
+    with ProcessPoolExecutor(max_workers=2) as pool:
+        return list(pool.map(_stage_one, [(folder, n, contract, i) for i, n in enumerate(names)]))
+
+
+def _repeat(staged: Sequence[EpisodeSummary], count: int) -> list[EpisodeSummary]:
+    return [staged[i % len(staged)] for i in range(count)]
+
+
+def _append_once(staged: list[EpisodeSummary], root: Path, base: int, probe: Any) -> tuple[float, int, int]:
+    shutil.rmtree(root, ignore_errors=True)
+    write_dataset(_repeat(staged, base), str(root), robot_type="bench_arm")
+    old = sorted(p for d in ("data", "videos") for p in (root / d).rglob("*") if p.is_file())
+    with probe.watch_opens(old) as opens:
+        started = time.perf_counter()
+        write_dataset(staged[:NEW], str(root), robot_type="bench_arm", append=True)
+        wall = time.perf_counter() - started
+    shutil.rmtree(root)
+    return wall, len(old), len(opens.events)
+
+
+def measure_append(
+    staged: list[EpisodeSummary], out: Path, bases: Sequence[int], runs: int = 3
+) -> list[dict[str, float]]:
+    """Each base size ``runs`` times, the sizes alternating; the median wall is reported."""
+    probe = _probe()
+    walls: dict[int, list[float]] = {base: [] for base in bases}
+    rows: dict[int, dict[str, float]] = {}
+    for _ in range(runs):
+        for base in bases:
+            load = _load()
+            wall, old, opens = _append_once(staged, out / f"append-{base}", base, probe)
+            walls[base].append(wall)
+            row = rows.setdefault(base, {"base": base, "old_files": old, "opens": 0, "load": load})
+            row["opens"] += opens
+            row["load"] = max(row["load"], load)
+    for base, row in rows.items():
+        row["wall_s"] = float(sorted(walls[base])[len(walls[base]) // 2])
+        row["walls"] = walls[base]  # type: ignore[assignment]
+        print(f"append {NEW} to {base}: {row}", flush=True)
+    return list(rows.values())
+
+
+def _commit_child(job: Path) -> None:
+    """In a fresh process: the commit alone, then its peak RSS (and the RSS before it, imports done)."""
+    session, summaries, written = pickle.loads(job.read_bytes())
+    before = _status_kb("VmRSS")
+    commit_write(session, summaries, written, robot_type="bench_arm")
+    print(json.dumps({"before_mb": before / 1024, "peak_mb": _status_kb("VmHWM") / 1024}))
+
+
+def _status_kb(field: str) -> int:
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(field + ":"):
+            return int(line.split()[1])
+    raise KeyError(field)
+
+
+def measure_commit(staged: list[EpisodeSummary], out: Path, sizes: Sequence[int]) -> list[dict[str, float]]:
+    rows = []
+    for count in sizes:
+        root = out / f"commit-{count}"
+        shutil.rmtree(root, ignore_errors=True)
+        summaries = _repeat(staged, count)
+        with open_write(summaries, str(root)) as session:
+            written = [write_planned_file(session.plan, item, session.build) for item in session.plan.files]
+            job = out / f"commit-{count}.pickle"
+            job.write_bytes(pickle.dumps((session, summaries, written)))
+            load = _load()
+            started = time.perf_counter()
+            child = subprocess.run(
+                [sys.executable, __file__, "--commit-child", str(job)],
+                capture_output=True,
+                text=True,
+                check=True,
+            )
+            wall = time.perf_counter() - started
+        rows.append(
+            {"episodes": count, "wall_s": wall, "load": load, **json.loads(child.stdout.splitlines()[-1])}
+        )
+        print(f"commit of {count}: {rows[-1]}", flush=True)
+        shutil.rmtree(root)
+        job.unlink()
+    return rows
+
+
+def measure_dask(staged: list[EpisodeSummary], out: Path, workers: Sequence[int]) -> list[dict[str, float]]:
+    from distributed import Client, LocalCluster  # noqa: PLC0415 - the dask extra
+
+    rows = []
+    for count in workers:
+        root = out / f"dask-{count}"
+        shutil.rmtree(root, ignore_errors=True)
+        with (
+            LocalCluster(
+                n_workers=count, threads_per_worker=1, processes=True, dashboard_address=None
+            ) as cluster,  # type: ignore[no-untyped-call]
+            Client(cluster) as client,  # type: ignore[no-untyped-call]
+        ):
+            client.run(lambda: None)
+            load = _load()
+            started = time.perf_counter()
+            with open_write(staged, str(root)) as session:
+                items = list(session.plan.files)
+                futures = client.map(
+                    write_planned_file,
+                    [session.plan] * len(items),
+                    items,
+                    [session.build] * len(items),
+                    pure=False,
+                )
+                commit_write(session, staged, client.gather(futures), robot_type="bench_arm")
+            wall = time.perf_counter() - started
+        rows.append({"workers": count, "wall_s": wall, "files": len(items), "load": load})
+        print(f"W1 reduce on {count} Dask worker(s): {rows[-1]}", flush=True)
+        shutil.rmtree(root)
+    return rows
+
+
+def _tables(results: dict[str, list[dict[str, float]]]) -> str:
+    lines: list[str] = []
+    if "append" in results:
+        lines += [f"Appending {NEW} one-second episodes (W4's shape):", "",
+                  "| dataset before | append wall s (median of 3) | existing data/video files | opens/reads of them (all runs) | load avg (1 min, max) |",
+                  "|---|---|---|---|---|"]  # fmt: skip
+        lines += [
+            f"| {r['base']} episodes | {r['wall_s']:.2f} | {r['old_files']} | {r['opens']} | {r['load']:.1f} |"
+            for r in results["append"]
+        ]
+        lines.append("")
+    if "commit" in results:
+        lines += ["The commit step alone, in a fresh process:", "",
+                  "| episodes written | commit wall s | RSS before (imports) MB | peak RSS MB | load avg (1 min) |",
+                  "|---|---|---|---|---|"]  # fmt: skip
+        lines += [
+            f"| {r['episodes']} | {r['wall_s']:.2f} | {r['before_mb']:.0f} | {r['peak_mb']:.0f} | {r['load']:.1f} |"
+            for r in results["commit"]
+        ]
+        lines.append("")
+    if "dask" in results:
+        lines += ["The reduce of W1 (staged once) on a local Dask cluster:", "",
+                  "| workers | reduce wall s | output files (tasks) | load avg (1 min) |", "|---|---|---|---|"]  # fmt: skip
+        lines += [
+            f"| {r['workers']} | {r['wall_s']:.2f} | {r['files']} | {r['load']:.1f} |"
+            for r in results["dask"]
+        ]
+        lines.append("")
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("--parts", default="append,commit,dask")
+    parser.add_argument("--data", type=Path, default=REPO / "bench/.data")
+    parser.add_argument("--report", type=Path, default=REPO / "BENCHMARKS.md")
+    parser.add_argument("--results", type=Path, default=REPO / "bench/reduce_map.json")
+    parser.add_argument("--commit-child", type=Path, default=None, help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.commit_child is not None:
+        _commit_child(args.commit_child)
+        return
+    parts = args.parts.split(",")
+    out = args.data / "reduce-map"
+    out.mkdir(parents=True, exist_ok=True)
+    results = json.loads(args.results.read_text()) if args.results.is_file() else {}
+    if "append" in parts or "commit" in parts:
+        small = stage("W4", args.data, episodes=NEW)
+        if "append" in parts:
+            results["append"] = measure_append(small, out, (100, 2000))
+        if "commit" in parts:
+            results["commit"] = measure_commit(small, out, (100, 2000))
+    if "dask" in parts:
+        results["dask"] = measure_dask(stage("W1", args.data), out, (1, 2))
+    args.results.write_text(json.dumps(results, indent=1))
+    body = _tables(results) + f"\nCommand: `.venv/bin/python bench/reduce_map.py --parts {args.parts}`."
+    print(body)
+    write_section(args.report, "reduce-map", body)
+
+
+if __name__ == "__main__":
+    main()

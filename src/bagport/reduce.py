@@ -1,0 +1,214 @@
+"""The reduce of a run as library calls: select the staged episodes the run keeps, write the dataset
+(in this process with :func:`reduce_run`; the flow writes each output file as a task, ``flows/reduce.py``),
+then the other formats and the staging clean-up. The plan side is :mod:`bagport.run`.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+from fsspec.core import url_to_fs
+
+from bagport import __version__
+from bagport.bags import source_stamp
+from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
+from bagport.dataset.history import dataset_report, record_exclusions
+from bagport.episode.staged import PlannedEpisode
+from bagport.errors import DatasetWriteError
+from bagport.formats import write_formats
+from bagport.qa import QAEntry
+from bagport.run import RunPlan, up_to_date, write_key
+from bagport.segment import kept_segmentation
+from bagport.selection import EpisodeFailure, select_episodes
+from bagport.staging import EpisodeSummary, read_summary
+from bagport.video import EncoderSettings
+
+__all__ = [
+    "ReduceStart",
+    "commit_reduce",
+    "finish_up_to_date",
+    "reduce_run",
+    "run_record",
+    "start_reduce",
+    "summary_json",
+]
+
+
+def finish_up_to_date(plan: RunPlan) -> DatasetReport:
+    """The report of a run whose dataset is up to date: the dataset as it stands, every episode reused,
+    none converted; the staged episodes are removed unless ``keep_staging`` (as a write would)."""
+    if not plan.config.keep_staging:
+        _remove_staged(plan, [e.dir_uri for e in plan.reused])
+    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in plan.reused)
+    report = dataset_report(plan.config.output)
+    return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs())
+
+
+def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str, Any]:
+    reused = [_episode_name(e.bag_uri, e.segment) for e in staged if e.reused]
+    return {
+        "bagport_version": __version__,
+        "repo_id": plan.config.resolved_repo_id(),
+        "contract": {"uri": plan.config.contract, "text": plan.contract_text},
+        "manifest": {
+            "uri": plan.config.manifest or plan.config.bags_glob,
+            "bags": [b.uri for b in plan.manifest.bags],
+            "converted_now": [r.bag_uri for r in plan.requests],
+            "reused": reused,
+        },
+        "episodes_reused": len(reused),
+        "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
+        "host_cpus": os.cpu_count(),
+    }
+
+
+def _episode_name(bag_uri: str, segment: int | None) -> str:
+    return bag_uri if segment is None else f"{bag_uri}#{segment}"
+
+
+@dataclass(frozen=True, slots=True)
+class ReduceStart:
+    """What the reduce writes: the kept episodes (with what the plan decides about each), every bag's QA
+    entry, the run record and the size limits; small and serialisable (it travels to the commit task)."""
+
+    kept: tuple[EpisodeSummary, ...]
+    entries: tuple[QAEntry, ...]
+    record: dict[str, Any]
+    limits: DatasetLimits
+
+
+def start_reduce(
+    plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
+) -> ReduceStart | DatasetReport:
+    """Read the staged summaries, put on each what the current plan decides about it (manifest entry,
+    metadata, label: never the staged record's, which may come from another manifest) and apply the QA
+    policy. When no episode is kept (an append whose new bags were all excluded), the exclusions are
+    recorded and the dataset's report returned: nothing else is written."""
+    summaries: list[EpisodeSummary] = []
+    stamped: list[PlannedEpisode] = []
+    for episode in staged:
+        summary = read_summary(episode.dir_uri)
+        if summary is None:
+            raise DatasetWriteError(
+                f"staged episode {episode.dir_uri} is incomplete (no episode.json); re-run the conversion."
+            )
+        summaries.append(episode.apply(summary))
+        stamped.append(replace(episode, source_stamp=summary.source_stamp))
+    fs, out_path = url_to_fs(plan.config.output)
+    kept, entries = select_episodes(
+        summaries,
+        failures,
+        policy=plan.qa.on_fail,
+        keep_labelled=plan.config.keep_failed,
+        output=plan.config.output,
+        appending=plan.config.append and bool(fs.exists(out_path)),
+    )
+    limits = DatasetLimits(
+        chunks_size=plan.config.chunks_size,
+        data_files_size_in_mb=plan.config.data_files_size_in_mb,
+        video_files_size_in_mb=plan.config.video_files_size_in_mb,
+    )
+    record = run_record(plan, staged)
+    if not plan.config.append:  # an append's record describes its own episodes only
+        record["write_key"] = write_key(plan, stamped, failures)
+    # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
+    record["excluded"] = [
+        replace(e.brief(), source_stamp=source_stamp(e.qa.bag_uri)).to_json()
+        for e in entries
+        if e.episode_index is None
+    ]
+    if not kept:  # an append whose new bags were all excluded: recorded, nothing written
+        record_exclusions(plan.config.output, record)
+        excluded = tuple(e.brief() for e in entries)
+        return replace(dataset_report(plan.config.output), excluded=excluded, qa=excluded)
+    return ReduceStart(tuple(kept), tuple(entries), record, limits)
+
+
+def commit_reduce(
+    plan: RunPlan,
+    staged: Sequence[PlannedEpisode],
+    failures: Sequence[EpisodeFailure],
+    start: ReduceStart,
+    lerobot: DatasetReport | None,
+) -> DatasetReport:
+    """After the LeRobot dataset (``lerobot``, when asked for) is written: the same kept episodes, from the
+    same staging, into every other format (no second read of the bags), then the staging clean-up."""
+    formats = plan.config.formats
+    others = write_formats(
+        start.kept,
+        plan.config,
+        robot_type=plan.contract.robot_type,
+        run_record=start.record,
+        qa=start.entries,
+    )
+    report = replace(lerobot or others[formats[0]], outputs=plan.config.format_outputs())
+    if not plan.config.keep_staging:
+        _remove_staged(plan, [e.dir_uri for e in staged])
+    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in staged if e.reused)
+    return replace(report, converted=len(staged) + len(failures) - len(reused), reused=reused)
+
+
+def reduce_run(
+    plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
+) -> DatasetReport:
+    """The whole reduce in this process (:func:`start_reduce`, the LeRobot write, :func:`commit_reduce`);
+    the flow runs the same steps with each output file as its own task (``flows/reduce.py``)."""
+    start = start_reduce(plan, staged, failures)
+    if isinstance(start, DatasetReport):
+        return start
+    lerobot = (
+        write_dataset(
+            start.kept,
+            plan.config.output,
+            robot_type=plan.contract.robot_type,
+            limits=start.limits,
+            run_record=start.record,
+            overwrite=plan.config.overwrite,
+            qa=start.entries,
+            qa_config=plan.qa.model_dump(mode="json"),
+            append=plan.config.append,
+        )
+        if "lerobot" in plan.config.formats
+        else None
+    )
+    return commit_reduce(plan, staged, failures, start, lerobot)
+
+
+def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:
+    """Remove this run's staged episodes and kept segmentations, then the staging store if it is empty
+    (another run may share it)."""
+    fs, path = url_to_fs(plan.config.resolved_staging())
+    kept_segmentations = (kept_segmentation(r, plan.contract) for r in plan.requests)
+    for uri in (*staged_dirs, *(u for u in kept_segmentations if u is not None)):
+        _, staged_path = url_to_fs(uri)
+        if fs.exists(staged_path):
+            fs.rm(staged_path, recursive=True)
+    try:
+        if fs.exists(path) and not fs.find(path):
+            fs.rm(path, recursive=True)
+    except OSError:
+        pass
+
+
+def summary_json(report: DatasetReport) -> str:
+    return json.dumps(
+        {
+            "root": report.root,
+            "episodes": report.episodes,
+            "frames": report.frames,
+            "duration_s": round(report.duration_s, 3),
+            "tasks": list(report.tasks),
+            "videos": list(report.video_keys),
+            "size_bytes": report.size_bytes,
+            "excluded": [row.to_json() for row in report.excluded],
+            "converted_now": report.converted,
+            "reused": len(report.reused),
+            "up_to_date": up_to_date(report),
+            "outputs": report.outputs,
+        },
+        indent=2,
+    )

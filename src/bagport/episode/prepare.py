@@ -40,7 +40,7 @@ def prepare_episode(whole: BagReader, plan: ContractPlan, request: EpisodeReques
     in the window: its reader, timeline, window and alignment."""
     info = whole.info
     check_bag_fits(info, plan)
-    window = request.window_ns(info.start_ns, info.end_ns)
+    window = request.window.resolve(info.start_ns, info.end_ns)
     reader: BagReader = whole if window is None else BagWindow(whole, *window)
     timeline = scan_plan_timeline(whole, plan, window)
     if window is not None:

@@ -13,9 +13,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["WHOLE_BAG", "TimeWindow"]
+__all__ = ["WHOLE_BAG", "TimeWindow", "WindowNs"]
 
 _NS_PER_S = 1_000_000_000
+
+WindowNs = tuple[int, int]
+"""A window resolved in a bag (:meth:`TimeWindow.resolve`): ``(start_ns, end_ns)`` in log time, inclusive."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -45,7 +48,7 @@ class TimeWindow:
             return ""
         return f"{self.start_ns}:{self.end_ns}:{self.start_s}:{self.end_s}"
 
-    def resolve(self, bag_start_ns: int, bag_end_ns: int) -> tuple[int, int] | None:
+    def resolve(self, bag_start_ns: int, bag_end_ns: int) -> WindowNs | None:
         """The window in log time (ns, inclusive) in a bag spanning ``[bag_start_ns, bag_end_ns]``;
         ``None`` for the whole bag."""
         if self.is_whole_bag:

@@ -18,6 +18,7 @@ from bagport.episode.alignment import Alignment, align_sources
 from bagport.episode.checks import check_bag_fits, check_window_has_data
 from bagport.episode.timeline import Timeline, scan_plan_timeline
 from bagport.request import EpisodeRequest
+from bagport.timewindow import WindowNs
 
 __all__ = ["PreparedEpisode", "prepare_episode"]
 
@@ -31,7 +32,8 @@ class PreparedEpisode:
     reader: BagReader
     """The episode's window of it (the whole bag without one)."""
     timeline: Timeline
-    window_ns: tuple[int, int] | None
+    window_ns: WindowNs | None
+    """The window's log time in the bag (``None``: the whole bag)."""
     alignment: Alignment
 
 

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import posixpath
 from dataclasses import dataclass, field
-from typing import Any, TypedDict
+from typing import Any
 
 import fsspec
 import pydantic
@@ -28,23 +28,13 @@ from pydantic import JsonValue
 
 from bagport.errors import ManifestError
 from bagport.manifest_csv import csv_entries
+from bagport.timewindow import WHOLE_BAG, TimeWindow
 from bagport.uris import is_local, protocol_of
 from bagport.yamlsource import YamlJson, load_yaml, primary_error
 
-__all__ = ["BagEntry", "Manifest", "ManifestWindow", "load_manifest", "parse_manifest"]
+__all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
 
 _GLOB_CHARS = frozenset("*?[")
-
-
-class ManifestWindow(TypedDict, total=False):
-    """An entry's window, only the keys it gives: ``start_s``/``end_s`` (seconds from the bag start) or
-    ``start_ns``/``end_ns`` (ROS time); empty: the whole bag. The keywords of an
-    :class:`bagport.request.EpisodeRequest`'s window."""
-
-    start_s: float
-    end_s: float
-    start_ns: int
-    end_ns: int
 
 
 class _Entry(pydantic.BaseModel):
@@ -68,17 +58,8 @@ class _Entry(pydantic.BaseModel):
                 raise ValueError(f"the window ends ({end}) before it starts ({start})")
         return self
 
-    def window(self) -> ManifestWindow:
-        window = ManifestWindow()
-        if self.start_s is not None:
-            window["start_s"] = self.start_s
-        if self.end_s is not None:
-            window["end_s"] = self.end_s
-        if self.start_ns is not None:
-            window["start_ns"] = self.start_ns
-        if self.end_ns is not None:
-            window["end_ns"] = self.end_ns
-        return window
+    def window(self) -> TimeWindow:
+        return TimeWindow(start_ns=self.start_ns, end_ns=self.end_ns, start_s=self.start_s, end_s=self.end_s)
 
 
 class _Manifest(pydantic.BaseModel):
@@ -94,8 +75,8 @@ class BagEntry:
     entry: int
     task: str | None = None
     metadata: dict[str, JsonValue] = field(default_factory=dict)
-    window: ManifestWindow = field(default_factory=ManifestWindow)
-    """``start_s``/``end_s`` (seconds from the bag start) or ``start_ns``/``end_ns`` (ROS time); empty:
+    window: TimeWindow = WHOLE_BAG
+    """``start_s``/``end_s`` (seconds from the bag start) or ``start_ns``/``end_ns`` (ROS time); none:
     the whole bag (or the episodes the contract finds in it)."""
 
 
@@ -214,7 +195,7 @@ def parse_manifest(
     else:
         items = _yaml_model(text, source).bags
     bags: list[BagEntry] = []
-    seen: dict[tuple[str, str], int] = {}
+    seen: dict[tuple[str, TimeWindow], int] = {}
     for index, item in enumerate(items):
         uri = _absolute(item.uri, base_dir)
         window = item.window()
@@ -222,7 +203,7 @@ def parse_manifest(
             {"entry": index} if rows is None else {"entry": index, "row": rows[index], "column": "uri"}
         )
         for found in _expand(uri, where, source, dict(storage_options or {})):
-            key = (found, repr(sorted(window.items())))
+            key = (found, window)
             if key in seen:
                 also = f"bags[{seen[key]}]" if rows is None else f"row {rows[seen[key]]}"
                 raise ManifestError(

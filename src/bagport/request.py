@@ -13,8 +13,8 @@ from typing import Any
 
 from pydantic import JsonValue
 
-from bagport.align import NS_PER_S
 from bagport.qa.config import QAConfig
+from bagport.timewindow import WHOLE_BAG, TimeWindow
 from bagport.video.settings import EncoderSettings
 
 __all__ = ["EpisodeOutcome", "EpisodeRequest", "episode_id_for"]
@@ -35,12 +35,8 @@ class EpisodeRequest:
     metadata: dict[str, JsonValue] = field(default_factory=dict)
     qa: QAConfig = field(default_factory=QAConfig)
     """QA thresholds (the defaults unless the run gives a QA file)."""
-    start_ns: int | None = None
-    end_ns: int | None = None
-    """The episode's window in bag log time (inclusive); ``None``: from the bag's start / to its end."""
-    start_s: float | None = None
-    end_s: float | None = None
-    """A manifest window in seconds from the bag's first message (resolved when the bag is open)."""
+    window: TimeWindow = WHOLE_BAG
+    """The episode's window of the bag (the manifest entry's, or one a segmentation found)."""
     segment: int | None = None
     """Index of the episode among those of its bag (``None``: the whole bag is one episode)."""
     label: str | None = None
@@ -51,58 +47,26 @@ class EpisodeRequest:
     """``{type name: .msg text}`` from ``--msg-path``: workers need no access to the folder."""
 
     @property
-    def has_window(self) -> bool:
-        return any(v is not None for v in (self.start_ns, self.end_ns, self.start_s, self.end_s))
-
-    @property
     def name(self) -> str:
         """The bag's file name, with ``#<segment>`` for one episode of several in a bag."""
         stem = self.bag_uri.rstrip("/").rsplit("/", 1)[-1]
         return stem if self.segment is None else f"{stem}#{self.segment}"
 
-    def window_ns(self, bag_start_ns: int, bag_end_ns: int) -> tuple[int, int] | None:
-        """The absolute window of this episode in a bag spanning ``[bag_start_ns, bag_end_ns]``."""
-        if not self.has_window:
-            return None
-        start = bag_start_ns
-        end = bag_end_ns
-        if self.start_ns is not None:
-            start = self.start_ns
-        elif self.start_s is not None:
-            start = bag_start_ns + round(self.start_s * NS_PER_S)
-        if self.end_ns is not None:
-            end = self.end_ns
-        elif self.end_s is not None:
-            end = bag_start_ns + round(self.end_s * NS_PER_S)
-        return start, end
-
-    def window_key(self) -> str:
-        """The window as text, for the episode id (empty for a whole bag)."""
-        if not self.has_window:
-            return ""
-        return f"{self.start_ns}:{self.end_ns}:{self.start_s}:{self.end_s}"
-
     def for_window(
-        self, segment: int, start_ns: int, end_ns: int, label: str | None, note: str, episode_id: str = ""
+        self, segment: int, window: TimeWindow, label: str | None, note: str, episode_id: str = ""
     ) -> EpisodeRequest:
         """The request for one episode of this bag; the recorder's ``episode_id`` (from its episode
         events) joins the episode's metadata."""
-        windowed = replace(
+        return replace(
             self,
+            episode_id=episode_id_for(
+                self.bag_uri, self.contract_text, self.encoder, window.key(), self.msg_definitions
+            ),
             metadata={**self.metadata, "episode_id": episode_id} if episode_id else self.metadata,
-            start_ns=start_ns,
-            end_ns=end_ns,
-            start_s=None,
-            end_s=None,
+            window=window,
             segment=segment,
             label=label,
             note=note,
-        )
-        return replace(
-            windowed,
-            episode_id=episode_id_for(
-                self.bag_uri, self.contract_text, self.encoder, windowed.window_key(), self.msg_definitions
-            ),
         )
 
     @property

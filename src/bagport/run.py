@@ -26,7 +26,7 @@ from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError
 from bagport.formats import check_format_outputs
-from bagport.manifest import Manifest, ManifestWindow, load_manifest, parse_manifest
+from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
 from bagport.segment import segment_request, segments_bags
 from bagport.selection import EpisodeFailure
@@ -109,9 +109,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(
-            episode_id=episode_id_for(
-                bag.uri, contract_text, encoder, window_key(bag.window), msg_definitions
-            ),
+            episode_id=episode_id_for(bag.uri, contract_text, encoder, bag.window.key(), msg_definitions),
             bag_uri=bag.uri,
             manifest_entry=bag.entry,
             staging_uri=staging,
@@ -121,7 +119,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             default_task=bag.task,
             metadata=bag.metadata,
             qa=qa,
-            **bag.window,
+            window=bag.window,
             msg_definitions=msg_definitions,
         )
         for bag in manifest.bags
@@ -223,13 +221,6 @@ def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -
         f"({'; '.join(differences)}); nothing was converted. Fix: append with the contract the dataset was "
         "made with, or convert into a new --output."
     )
-
-
-def window_key(window: ManifestWindow) -> str:
-    """A manifest window as the text its request's :meth:`EpisodeRequest.window_key` gives."""
-    if not window:
-        return ""
-    return EpisodeRequest("", "", 0, "", "", "", **window).window_key()
 
 
 def segment_all(plan: RunPlan) -> tuple[tuple[EpisodeRequest, ...], tuple[str, ...]]:

@@ -24,6 +24,7 @@ from fsspec.core import url_to_fs
 from pydantic import JsonValue
 
 from bagport.errors import TransientError
+from bagport.timewindow import WindowNs
 
 __all__ = [
     "EPISODE_SUMMARY",
@@ -83,7 +84,7 @@ class EpisodeSummary:
     qa: dict[str, Any] = field(default_factory=dict)
     """QA score, verdict and the checks that did not pass (the full record is ``qa.json``)."""
     qa_sha256: str = ""
-    window_ns: tuple[int, int] | None = None
+    window_ns: WindowNs | None = None
     """The episode's window in bag log time when the bag holds several episodes (or a manifest window)."""
     segment: int | None = None
     label: str | None = None

@@ -9,6 +9,7 @@ import pytest
 
 from bagport.errors import ManifestError
 from bagport.manifest import load_manifest, parse_manifest
+from bagport.timewindow import TimeWindow
 
 
 def _touch(path: Path) -> Path:
@@ -103,9 +104,9 @@ def test_a_bag_may_be_listed_once_per_window(tmp_path: Path) -> None:
     )
     manifest = parse_manifest(text, "m.yaml", base_dir=str(tmp_path))
     assert [(b.window, b.task) for b in manifest.bags] == [
-        ({"end_s": 10.0}, None),
-        ({"start_s": 10.0}, "second"),
-        ({}, None),
+        (TimeWindow(end_s=10.0), None),
+        (TimeWindow(start_s=10.0), "second"),
+        (TimeWindow(), None),
     ]
     with pytest.raises(ManifestError, match=r"bags\[1\]: bag .* is listed twice \(also bags\[0\]\)"):
         parse_manifest(

@@ -12,6 +12,7 @@ import pytest
 from bagport.errors import ManifestError
 from bagport.manifest import load_manifest
 from bagport.synth import EpisodeSpec, write_episode_bag
+from bagport.timewindow import TimeWindow
 from tests.helpers import SAMPLE_CONTRACT, convert_in_process
 
 
@@ -33,8 +34,8 @@ def test_columns_become_entries_and_metadata(tmp_path: Path) -> None:
     )
     loaded = load_manifest(str(manifest))
     assert [(Path(b.uri).name, b.entry, b.task, b.window) for b in loaded.bags] == [
-        ("a.mcap", 0, "fold the towel", {}),
-        ("b.mcap", 1, "pick, then place", {"start_s": 1.5, "end_s": 4.0}),
+        ("a.mcap", 0, "fold the towel", TimeWindow()),
+        ("b.mcap", 1, "pick, then place", TimeWindow(start_s=1.5, end_s=4.0)),
     ]
     assert loaded.bags[1].metadata == {"robot_id": "arm-09", "collection_date": "2026-11-03"}
 

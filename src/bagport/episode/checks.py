@@ -8,6 +8,7 @@ from bagport.bags import BagInfo
 from bagport.contract import ContractPlan, normalize_msgtype
 from bagport.episode.timeline import Timeline
 from bagport.errors import AlignmentError, ContractError
+from bagport.timewindow import WindowNs
 
 __all__ = ["bag_fingerprint", "check_bag_fits", "check_window_has_data"]
 
@@ -54,9 +55,7 @@ def check_bag_fits(info: BagInfo, plan: ContractPlan) -> None:
             )
 
 
-def check_window_has_data(
-    timeline: Timeline, window_ns: tuple[int, int], bag_start_ns: int, uri: str
-) -> None:
+def check_window_has_data(timeline: Timeline, window_ns: WindowNs, bag_start_ns: int, uri: str) -> None:
     """Every contract stream has messages inside an episode window."""
     start_s, end_s = ((t - bag_start_ns) / 1e9 for t in window_ns)
     for topic in timeline.topics.values():

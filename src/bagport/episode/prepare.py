@@ -18,6 +18,7 @@ from bagport.episode.alignment import Alignment, align_sources
 from bagport.episode.checks import check_bag_fits, check_window_has_data
 from bagport.episode.timeline import Timeline, scan_plan_timeline
 from bagport.request import EpisodeRequest
+from bagport.timewindow import WindowNs
 
 __all__ = ["PreparedEpisode", "prepare_episode"]
 
@@ -31,7 +32,8 @@ class PreparedEpisode:
     reader: BagReader
     """The episode's window of it (the whole bag without one)."""
     timeline: Timeline
-    window_ns: tuple[int, int] | None
+    window_ns: WindowNs | None
+    """The window's log time in the bag (``None``: the whole bag)."""
     alignment: Alignment
 
 
@@ -40,7 +42,7 @@ def prepare_episode(whole: BagReader, plan: ContractPlan, request: EpisodeReques
     in the window: its reader, timeline, window and alignment."""
     info = whole.info
     check_bag_fits(info, plan)
-    window = request.window_ns(info.start_ns, info.end_ns)
+    window = request.window.resolve(info.start_ns, info.end_ns)
     reader: BagReader = whole if window is None else BagWindow(whole, *window)
     timeline = scan_plan_timeline(whole, plan, window)
     if window is not None:

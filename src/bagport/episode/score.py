@@ -120,7 +120,7 @@ def score_manifest(
             metadata=bag.metadata,
             qa=qa,
             msg_definitions=dict(msg_definitions or {}),
-            **bag.window,
+            window=bag.window,
         )
         for bag in manifest.bags
     ]

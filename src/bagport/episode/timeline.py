@@ -22,6 +22,7 @@ from bagport.decode.video import KeyframeGate, video_packet
 from bagport.episode.video import keyframe_before
 from bagport.errors import AlignmentError, BagReadError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
+from bagport.timewindow import WindowNs
 
 __all__ = ["TaskMessage", "Timeline", "TopicTimeline", "scan_plan_timeline", "scan_timeline"]
 
@@ -119,7 +120,7 @@ def _filtered_stamp(message: BagMessage, spec: StreamFilter, seen: dict[str, Non
 
 
 def _video_gates(
-    reader: BagReader, topics: Iterable[str], window_ns: tuple[int, int] | None
+    reader: BagReader, topics: Iterable[str], window_ns: WindowNs | None
 ) -> tuple[dict[str, KeyframeGate], dict[str, tuple[int, int]]]:
     """A key-frame gate per video topic, open from the start when a key frame precedes the window."""
     gates, prerolls = {}, {}
@@ -144,7 +145,7 @@ def _check_samples_found(
     filters: Mapping[str, StreamFilter],
     log: Mapping[str, list[int]],
     frames_seen: Mapping[str, None],
-    window_ns: tuple[int, int] | None,
+    window_ns: WindowNs | None,
 ) -> None:
     """Every video stream has a key frame, every filtered stream a message carrying its transform."""
     for topic, gate in gates.items():
@@ -198,7 +199,7 @@ def scan_timeline(
     task_topics: Iterable[str],
     filters: Mapping[str, StreamFilter] | None = None,
     publish_topics: Iterable[str] = (),
-    window_ns: tuple[int, int] | None = None,
+    window_ns: WindowNs | None = None,
     video_topics: Iterable[str] = (),
 ) -> Timeline:
     """Stamps of every stream; ``topics`` are stream names (see ``SourceSpec.stream``): a topic, or a
@@ -249,9 +250,7 @@ def scan_timeline(
     return Timeline(topics=result, tasks=tuple(tasks))
 
 
-def scan_plan_timeline(
-    reader: BagReader, plan: ContractPlan, window_ns: tuple[int, int] | None = None
-) -> Timeline:
+def scan_plan_timeline(reader: BagReader, plan: ContractPlan, window_ns: WindowNs | None = None) -> Timeline:
     """:func:`scan_timeline` of every topic a contract reads (publish times where it asks for them)."""
     return scan_timeline(
         reader,

@@ -45,7 +45,7 @@ def segmentation_uri(
         stamp,
         options.model_dump_json(),
         "\n".join(stream_topics) if options.gap_s is not None else "",
-        request.window_key(),
+        request.window.key(),
         msg_definitions_sha256(request.msg_definitions),
         __version__,
     )

@@ -139,7 +139,7 @@ def segment_request(request: EpisodeRequest) -> SegmentedBag:
         return SegmentedBag((request,))
     segmentation, cached = _cached_or_scanned(request, *splitting)
     requests = tuple(
-        request.for_window(k, w.start_ns, w.end_ns, w.label, w.note, w.episode_id)
+        request.for_window(k, w.window, w.label, w.note, w.episode_id)
         for k, w in enumerate(segmentation.windows)
     )
     return SegmentedBag(requests, segmentation.ignored, cached)
@@ -156,7 +156,7 @@ def _splitting(request: EpisodeRequest, plan: ContractPlan) -> tuple[EpisodesOpt
     """The contract's episodes options and stream topics, or ``None`` when the request is not split
     (the contract does not segment bags, or the manifest entry gives an explicit window)."""
     options = plan.contract.episodes
-    if options is None or not segments_bags(plan) or request.has_window:
+    if options is None or not segments_bags(plan) or not request.window.is_whole_bag:
         return None
     return options, tuple(dict.fromkeys(src.topic for src in plan.sources))
 

@@ -25,6 +25,7 @@ import numpy as np
 import numpy.typing as npt
 
 from bagport.align import NS_PER_S
+from bagport.timewindow import TimeWindow
 
 __all__ = [
     "EpisodeWindow",
@@ -82,6 +83,11 @@ class EpisodeWindow:
     @property
     def duration_s(self) -> float:
         return (self.end_ns - self.start_ns) / NS_PER_S
+
+    @property
+    def window(self) -> TimeWindow:
+        """The episode's window of the bag, as an episode request holds it."""
+        return TimeWindow.of_ns(self.start_ns, self.end_ns)
 
 
 @dataclass(frozen=True, slots=True)

@@ -279,4 +279,6 @@ def test_ros1_relative_event_topic_splits_episodes(tmp_path: Path) -> None:
     contract = _contract("/joint_states") + "episodes:\n  events: {topic: /episode_events}\n"
     describe_features(parse_contract(contract, "c.yaml"), str(bag))  # contract check --bag passes
     found = segment_request(episode_request(bag, tmp_path / "staging", contract))
-    assert [(r.start_ns, r.end_ns, r.label) for r in found.requests] == [(ticks[5], ticks[25], "success")]
+    assert [(r.window.start_ns, r.window.end_ns, r.label) for r in found.requests] == [
+        (ticks[5], ticks[25], "success")
+    ]

@@ -20,6 +20,7 @@ from bagport.episode import convert_episode
 from bagport.errors import AlignmentError
 from bagport.staging import QA_FILE, EpisodeSummary
 from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, decode_frame_index, write_episode_bag
+from bagport.timewindow import TimeWindow
 from bagport.video import iter_frames
 from tests.helpers import episode_request
 
@@ -146,8 +147,7 @@ def test_window_starting_mid_gop_gives_the_frames_of_the_whole_bag(
     start_ns = int(stamps[45])  # frame 45: halfway through the second GOP
     request = replace(
         episode_request(bag, tmp_path / "staging", _contract(FRONT)),
-        start_ns=start_ns,
-        end_ns=int(stamps[80]),
+        window=TimeWindow.of_ns(start_ns, int(stamps[80])),
     )
     window = convert_episode(replace(request, episode_id=request.episode_id + "-w"))
     assert _qa(window)[("video.skipped_packets", FRONT.topic)]["value"] == 0

@@ -63,8 +63,7 @@ def test_a_second_segmentation_of_the_same_bag_does_not_open_it(tmp_path: Path, 
     other_codec = segment_request(_request(bag, crf=40))
     assert other_codec.cached
     assert other_codec.requests == tuple(
-        _request(bag, crf=40).for_window(k, r.start_ns or 0, r.end_ns or 0, r.label, r.note)
-        for k, r in enumerate(first.requests)
+        _request(bag, crf=40).for_window(k, r.window, r.label, r.note) for k, r in enumerate(first.requests)
     )
     assert len(opened) == 1
 

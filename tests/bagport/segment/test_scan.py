@@ -11,6 +11,7 @@ from bagport.bags import open_bag
 from bagport.episode import EpisodeRequest, convert_episode
 from bagport.segment import segment_request
 from bagport.synth import CameraSpec, EpisodeSpec, split_recording, write_episode_bag
+from bagport.timewindow import TimeWindow
 from tests.helpers import SAMPLE_CONTRACT, episode_request
 
 S = 1_000_000_000
@@ -27,7 +28,10 @@ def _request(bag: Path, episodes: str, staging: Path | None = None) -> EpisodeRe
 
 def _spans_s(requests: tuple[EpisodeRequest, ...]) -> list[tuple[float, float]]:
     return [
-        (round(((r.start_ns or 0) - SPEC.start_ns) / S, 3), round(((r.end_ns or 0) - SPEC.start_ns) / S, 3))
+        (
+            round(((r.window.start_ns or 0) - SPEC.start_ns) / S, 3),
+            round(((r.window.end_ns or 0) - SPEC.start_ns) / S, 3),
+        )
         for r in requests
     ]
 
@@ -59,7 +63,9 @@ def test_events_that_name_no_event_are_reported_and_a_bag_without_events_is_one_
 def test_a_contract_without_episodes_or_a_manifest_window_keeps_the_request(tmp_path: Path) -> None:
     request = _request(tmp_path / "not-read", "")
     assert segment_request(request).requests == (request,)
-    windowed = replace(_request(tmp_path / "not-read", "episodes: {gap_s: 1}\n"), start_s=1.0)
+    windowed = replace(
+        _request(tmp_path / "not-read", "episodes: {gap_s: 1}\n"), window=TimeWindow(start_s=1.0)
+    )
     assert segment_request(windowed).requests == (windowed,)
 
 
@@ -77,7 +83,7 @@ def test_one_episode_spans_the_files_of_a_split_recording(tmp_path: Path) -> Non
     assert _spans_s(found.requests) == [(0.5, 3.5)]
     assert (found.requests[0].label, found.requests[0].note) == ("success", "across files")
     summary = convert_episode(found.requests[0])
-    assert summary.window_ns == (found.requests[0].start_ns, found.requests[0].end_ns)
+    assert summary.window_ns == (found.requests[0].window.start_ns, found.requests[0].window.end_ns)
     first_s = (summary.first_tick_ns - spec.start_ns) / S
     last_s = (summary.last_tick_ns - spec.start_ns) / S
     assert first_s == pytest.approx(0.5, abs=0.05)

@@ -103,8 +103,8 @@ def _spans_s(bag: Path, contract: str, tmp_path: Path) -> list[tuple[float, floa
     found = segment_request(episode_request(bag, tmp_path / "staging", contract))
     return [
         (
-            ((r.start_ns or 0) - START_NS) / S,
-            ((r.end_ns or 0) - START_NS) / S,
+            ((r.window.start_ns or 0) - START_NS) / S,
+            ((r.window.end_ns or 0) - START_NS) / S,
             r.label,
             str(r.metadata.get("episode_id", "")),
         )

@@ -1,0 +1,68 @@
+"""An episode's time window in a bag: one value from the manifest entry to the worker that reads it.
+
+Each end is given on one of two clocks, or not at all: ``*_ns`` in the bag's log time (ROS time,
+absolute), ``*_s`` in seconds from the bag's first message (a manifest's ``start_s``/``end_s``, known
+in absolute time only once the bag is open). An end not given is the bag's own start or end; a window
+with no end given is the whole bag (the default, :data:`WHOLE_BAG`).
+
+A low, neutral module: the manifest (:mod:`bagport.manifest`), the episode request
+(:mod:`bagport.request`), segmentation and conversion all pass a :class:`TimeWindow`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+__all__ = ["WHOLE_BAG", "TimeWindow", "WindowNs"]
+
+_NS_PER_S = 1_000_000_000
+
+WindowNs = tuple[int, int]
+"""A window resolved in a bag (:meth:`TimeWindow.resolve`): ``(start_ns, end_ns)`` in log time, inclusive."""
+
+
+@dataclass(frozen=True, slots=True)
+class TimeWindow:
+    """``[start, end]`` (inclusive) of a bag; see the module doc for the two clocks."""
+
+    start_ns: int | None = None
+    end_ns: int | None = None
+    """Bag log time (ROS time) in ns; ``None``: from the bag's start / to its end (or ``*_s``)."""
+    start_s: float | None = None
+    end_s: float | None = None
+    """Seconds from the bag's first message (resolved when the bag is open)."""
+
+    @classmethod
+    def of_ns(cls, start_ns: int, end_ns: int) -> TimeWindow:
+        """The window ``[start_ns, end_ns]`` in bag log time (an episode a segmentation found)."""
+        return cls(start_ns=start_ns, end_ns=end_ns)
+
+    @property
+    def is_whole_bag(self) -> bool:
+        """No end given: the whole bag (or the episodes a contract finds in it)."""
+        return self.start_ns is None and self.end_ns is None and self.start_s is None and self.end_s is None
+
+    def key(self) -> str:
+        """The window as text, for the ids of what it stages (empty for the whole bag)."""
+        if self.is_whole_bag:
+            return ""
+        return f"{self.start_ns}:{self.end_ns}:{self.start_s}:{self.end_s}"
+
+    def resolve(self, bag_start_ns: int, bag_end_ns: int) -> WindowNs | None:
+        """The window in log time (ns, inclusive) in a bag spanning ``[bag_start_ns, bag_end_ns]``;
+        ``None`` for the whole bag."""
+        if self.is_whole_bag:
+            return None
+        start, end = bag_start_ns, bag_end_ns
+        if self.start_ns is not None:
+            start = self.start_ns
+        elif self.start_s is not None:
+            start = bag_start_ns + round(self.start_s * _NS_PER_S)
+        if self.end_ns is not None:
+            end = self.end_ns
+        elif self.end_s is not None:
+            end = bag_start_ns + round(self.end_s * _NS_PER_S)
+        return start, end
+
+
+WHOLE_BAG = TimeWindow()

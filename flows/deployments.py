@@ -29,7 +29,7 @@ from prefect.client.schemas.objects import State
 from prefect.runtime import flow_run
 from pydantic import Field, model_validator
 
-from bagport.config import ConvertConfig
+from bagport.config import RUNNER_ADDRESSES, ConvertConfig, cli_option
 from bagport.dataset import DatasetReport
 from bagport.errors import BagportError
 from flows.artifacts import publish_run_artifacts
@@ -40,8 +40,9 @@ from flows.run_story import RunCounts, completed_state, started_name
 __all__ = ["DeploymentConfig", "ParameterNotSetError", "ingest", "reconvert"]
 
 _PLACEHOLDER = re.compile(r"^\{\{\s*\$(\w+)\s*\}\}$")
-_BAG_SOURCE = ("manifest", "bags_glob")
-_ADDRESSES = {"dask_address": "dask", "ray_address": "ray"}
+_BAG_SOURCE = tuple(
+    name for name, f in ConvertConfig.model_fields.items() if cli_option(name, f).group == "bags"
+)
 
 
 class ParameterNotSetError(BagportError):
@@ -99,7 +100,7 @@ class DeploymentConfig(ConvertConfig):
         if not isinstance(data, Mapping):
             return data
         values = _without_placeholders(data)
-        addresses = [runner for name, runner in _ADDRESSES.items() if values.get(name)]
+        addresses = [runner for runner, name in RUNNER_ADDRESSES.items() if values.get(name)]
         if "runner" not in values and len(addresses) == 1:
             values["runner"] = addresses[0]  # the address says which runner
         return resolve_options(values)

@@ -11,7 +11,7 @@ from contextlib import contextmanager
 from moto.server import ThreadedMotoServer
 from s3fs import S3FileSystem
 
-__all__ = ["KEY_ID", "SECRET", "moto_s3"]
+__all__ = ["KEY_ID", "SECRET", "moto_s3", "s3_bucket"]
 
 KEY_ID = "AKIABAGPORTTESTKEY01"
 SECRET = "bagport-test-secret-key"
@@ -52,3 +52,12 @@ def moto_s3() -> Iterator[dict[str, str]]:
                 os.environ[key] = value
         server.stop()
         S3FileSystem.clear_instance_cache()
+
+
+def s3_bucket(env: dict[str, str], bucket: str) -> S3FileSystem:
+    """An s3fs client of :func:`moto_s3`'s endpoint (``env``), with ``bucket`` made if it is missing (a module's
+    tests share one server)."""
+    fs = S3FileSystem(endpoint_url=env["AWS_ENDPOINT_URL"])
+    if not fs.exists(bucket):
+        fs.mkdir(bucket)
+    return fs

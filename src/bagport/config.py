@@ -13,7 +13,7 @@ from pydantic.fields import FieldInfo
 
 from bagport.yamlsource import YamlJson
 
-__all__ = ["CliOption", "ConvertConfig", "cli_option"]
+__all__ = ["RUNNER_ADDRESSES", "CliOption", "ConvertConfig", "cli_option"]
 
 
 @dataclass(frozen=True)
@@ -48,6 +48,8 @@ def _default_encoder() -> dict[str, YamlJson]:
 
 
 _BAGS = CliOption(group="bags")
+RUNNER_ADDRESSES = {"dask": "dask_address", "ray": "ray_address"}
+"""The runners that can use an existing cluster, and the :class:`ConvertConfig` field of its address."""
 
 
 class ConvertConfig(BaseModel):
@@ -162,10 +164,11 @@ class ConvertConfig(BaseModel):
 
     @model_validator(mode="after")
     def _address_of_its_runner(self) -> ConvertConfig:
-        for runner, address in (("dask", self.dask_address), ("ray", self.ray_address)):
+        for runner, name in RUNNER_ADDRESSES.items():
+            address = getattr(self, name)
             if address is not None and self.runner != runner:
                 raise ValueError(
-                    f"{runner}_address {address!r} is only used with runner {runner!r}, not {self.runner!r}: "
+                    f"{name} {address!r} is only used with runner {runner!r}, not {self.runner!r}: "
                     f"add --runner {runner} (runner: {runner}), or leave the address out"
                 )
         return self

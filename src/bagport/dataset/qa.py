@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import replace
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,7 @@ from fsspec.core import url_to_fs
 
 from bagport.dataset.meta import EpisodeStats
 from bagport.dataset.sketches import DatasetSketches
-from bagport.qa import QAConfig, QAEntry
+from bagport.qa import QABrief, QAConfig, QAEntry
 from bagport.qa.fleet import INDEX_SCHEMA, detail_path, index_table, render_fleet_page
 from bagport.qa.jumps import step_outlier_checks
 from bagport.qa.report import Names, render_episode_page
@@ -48,10 +48,9 @@ QA_TABLE_PATH = "meta/qa/chunk-000/file-000.parquet"
 QA_SUMMARY_PATH = "meta/qa/summary.json"
 QA_REPORT_PATH = "meta/qa/report.html"
 QA_INDEX_PATH = "meta/qa/index/run-{run:03d}.parquet"
-_BRIEF_KEYS = (
-    "bag_uri", "manifest_entry", "episode_index", "score", "verdict", "excluded", "reason", "duration_s",
-    "frames", "video_psnr_min_db", "video_damaged_frames", "segment", "label", "note", "excluded_by_label",
-)  # fmt: skip
+_BRIEF_KEYS = tuple(f.name for f in fields(QABrief) if f.name in INDEX_SCHEMA.names)
+"""A :class:`~bagport.qa.QABrief`'s fields the QA index keeps (all but its metadata and source stamp), in
+the brief's order: one ``summary.json`` episode."""
 
 
 _QA_FIELDS: list[tuple[str, pa.DataType]] = [
@@ -93,21 +92,7 @@ def add_fleet_checks(
 
 
 def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
-    rows: dict[str, list[Any]] = {
-        name: []
-        for name in (
-            "bag_uri",
-            "episode_index",
-            "excluded",
-            "check",
-            "subject",
-            "value",
-            "verdict",
-            "hard",
-            "reason",
-            "robot_id",
-        )
-    }
+    rows: dict[str, list[Any]] = {name: [] for name in QA_SCHEMA.names}
     for entry in entries:
         for check in entry.qa.checks:
             rows["bag_uri"].append(entry.qa.bag_uri)

@@ -91,18 +91,14 @@ class EpisodeFidelity:
         return checks, plots
 
     def _depth_checks(self, key: str, result: ClipFidelity) -> tuple[list[CheckResult], dict[str, Any]]:
-        listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
         checks = [
             _frame_check(key, result, self._config),
-            judge(
-                "video.damaged_frames",
+            _damaged_check(
                 key,
-                float(result.damaged_frames),
-                self._config.damaged_frames,
-                f"{result.damaged_frames} depth frame(s) decode with codes other than those encoded "
-                f"(lossless HEVC)"
-                + (f" (frames {listed})" if listed else "")
-                + f"; all {result.sampled_frames} frames checked",
+                result,
+                self._config,
+                "depth frame(s) decode with codes other than those encoded (lossless HEVC)",
+                f"all {result.sampled_frames} frames checked",
             ),
         ]
         return checks, result.to_dict()
@@ -112,7 +108,6 @@ class EpisodeFidelity:
         share = f"{result.sampled_frames} of {result.frames_expected} frames checked"
         psnr = result.psnr_min_db if result.psnr_min_db is not None else 0.0
         where = f" (frame {result.worst_frame_index})" if result.worst_frame_index is not None else ""
-        listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
         found = [
             _frame_check(key, result, config),
             judge(
@@ -123,15 +118,7 @@ class EpisodeFidelity:
                 f"worst frame {psnr:.1f} dB{where}, median {result.psnr_median_db} dB; {share}",
                 lower_is_worse=True,
             ),
-            judge(
-                "video.damaged_frames",
-                key,
-                float(result.damaged_frames),
-                config.damaged_frames,
-                f"{result.damaged_frames} frame(s) with stale or foreign blocks"
-                + (f" (frames {listed})" if listed else "")
-                + f"; {share}",
-            ),
+            _damaged_check(key, result, config, "frame(s) with stale or foreign blocks", share),
             judge(
                 "video.copied_frames",
                 key,
@@ -169,6 +156,13 @@ def _frame_check(key: str, result: ClipFidelity, config: VideoQA) -> CheckResult
     ]
     said = "; ".join(p for p in problems if p) or f"{result.frames_decoded} frames, timestamps on the grid"
     return judge("video.frame_mismatch", key, float(mismatch), config.frame_mismatch, said)
+
+
+def _damaged_check(key: str, result: ClipFidelity, config: VideoQA, what: str, share: str) -> CheckResult:
+    """``video.damaged_frames``: how many frames ``what`` (the first ten listed), and how many were checked."""
+    listed = ", ".join(str(i) for i in result.damaged_frame_indices[:10])
+    said = f"{result.damaged_frames} {what}" + (f" (frames {listed})" if listed else "") + f"; {share}"
+    return judge("video.damaged_frames", key, float(result.damaged_frames), config.damaged_frames, said)
 
 
 def _jpeg_base64(rgb: npt.NDArray[np.uint8]) -> str:

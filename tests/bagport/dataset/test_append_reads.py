@@ -15,6 +15,7 @@ from bagport.dataset import write_dataset
 from bagport.dataset.validate import validate_dataset
 from bagport.staging import EpisodeSummary
 from tests.fsprobe import watch_opens
+from tests.s3 import s3_bucket
 
 
 def _old_files(root: Path) -> list[Path]:
@@ -48,10 +49,7 @@ def test_the_probe_sees_a_read(tmp_path: Path) -> None:
 
 @pytest.fixture
 def s3(s3_env: dict[str, str]) -> s3fs.S3FileSystem:
-    fs = s3fs.S3FileSystem(endpoint_url=s3_env["AWS_ENDPOINT_URL"])
-    if not fs.exists("reads"):
-        fs.mkdir("reads")
-    return fs
+    return s3_bucket(s3_env, "reads")
 
 
 def test_an_s3_append_reads_no_existing_data_or_video_object(

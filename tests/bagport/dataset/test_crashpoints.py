@@ -23,6 +23,7 @@ from bagport.dataset.repair import interrupted_write, repair_dataset
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import ValidationError
 from bagport.staging import EpisodeSummary
+from tests.s3 import s3_bucket
 
 Tree = dict[str, str]
 SCENARIOS = ("first", "overwrite", "append")
@@ -152,10 +153,7 @@ def test_a_local_kill_after_each_step_recovers_to_the_uninterrupted_result(
 
 @pytest.fixture
 def s3(s3_env: dict[str, str]) -> s3fs.S3FileSystem:
-    fs = s3fs.S3FileSystem(endpoint_url=s3_env["AWS_ENDPOINT_URL"])
-    if not fs.exists("sweep"):
-        fs.mkdir("sweep")
-    return fs
+    return s3_bucket(s3_env, "sweep")
 
 
 @pytest.mark.slow

@@ -17,6 +17,7 @@ from bagport.reduce import reduce_run
 from bagport.run import plan_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
+from tests.s3 import s3_bucket
 
 pytestmark = pytest.mark.slow
 
@@ -38,10 +39,7 @@ def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture
 def s3(s3_env: dict[str, str]) -> s3fs.S3FileSystem:
-    fs = s3fs.S3FileSystem(endpoint_url=s3_env["AWS_ENDPOINT_URL"])
-    if not fs.exists("fleet"):
-        fs.mkdir("fleet")
-    return fs
+    return s3_bucket(s3_env, "fleet")
 
 
 def _append(bags: Path, names: list[str], output: str, staging: Path) -> int:

@@ -13,7 +13,6 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-import s3fs
 
 from bagport.dataset import DatasetLimits, write_dataset
 from bagport.dataset.data_files import DataPlacement
@@ -27,6 +26,7 @@ from bagport.stats import QUANTILES, rank_error
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.fswatch import s3_reads, watch_reads
 from tests.helpers import SAMPLE_CONTRACT, episode_request
+from tests.s3 import s3_bucket
 
 pytestmark = pytest.mark.slow
 
@@ -142,9 +142,7 @@ def test_s3_append_reads_no_old_object(
     staged: tuple[list[EpisodeSummary], list[EpisodeSummary]], s3_env: dict[str, str]
 ) -> None:
     first, appended = staged
-    fs = s3fs.S3FileSystem(endpoint_url=s3_env["AWS_ENDPOINT_URL"])
-    if not fs.exists("fleet"):
-        fs.mkdir("fleet")
+    fs = s3_bucket(s3_env, "fleet")
     write_dataset(first, "s3://fleet/sketched", robot_type="r", limits=LIMITS)
     fs.invalidate_cache()
     old = {p: fs.cat_file(p) for p in fs.find("fleet/sketched") if p.split("/")[2] in ("data", "videos")}

@@ -40,10 +40,11 @@ from bagport.dataset.files import write_planned_file  # noqa: E402
 from bagport.dataset.session import open_write  # noqa: E402
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for  # noqa: E402
 from bagport.staging import EpisodeSummary  # noqa: E402
+from bagport.video.settings import EncoderSettings  # noqa: E402
 from bench.report import write_section  # noqa: E402
 from bench.workloads import WORKLOADS, ensure_workload  # noqa: E402
 
-CODEC = yaml.safe_load((REPO / "configs/codecs/h264-fast.yaml").read_text())
+CODEC = EncoderSettings.from_dict(yaml.safe_load((REPO / "configs/codecs/h264-fast.yaml").read_text()))
 NEW = 20
 
 

@@ -80,6 +80,25 @@ def _read_json(fs: AbstractFileSystem, path: str) -> Any:
         return json.load(handle)
 
 
+_TOP_FILES = b'\n  "files": '
+"""Where the ``files`` digests start in a run record (written as ``json.dumps(indent=2)`` writes it: a
+top-level key is the only text at two spaces' indent, strings hold no raw newline)."""
+
+
+def _record_files(raw: bytes) -> dict[str, str] | None:
+    """A run record's ``files`` (the digests, after its episodes): only its tail is parsed, so an append
+    after a large run does not parse every episode's entry; any other layout is parsed whole."""
+    at = raw.rfind(_TOP_FILES)
+    if at >= 0:
+        try:
+            files: dict[str, str] | None = json.loads(b"{" + raw[at + 1 :]).get("files")
+            return files
+        except json.JSONDecodeError:
+            pass
+    whole: dict[str, str] | None = json.loads(raw).get("files")
+    return whole
+
+
 def read_base(root: str | Path) -> DatasetBase:
     """Read what an append needs from the dataset at ``root`` (a local path or fsspec URI)."""
     fs, path = url_to_fs(str(root))
@@ -106,7 +125,7 @@ def read_base(root: str | Path) -> DatasetBase:
     if newest is not None:
         with fs.open(newest, "rb") as handle:
             raw = handle.read()
-        files = json.loads(raw).get("files")
+        files = _record_files(raw)
         if files is not None:
             files = {**files, str(newest)[len(path) + 1 :]: hashlib.sha256(raw).hexdigest()}
     return DatasetBase(

@@ -6,8 +6,12 @@ writes one planned item from the staging store into the build location and retur
 :class:`WrittenFile` (paths, sizes, SHA-256, the per-episode placements ``meta/`` needs). The commit
 (:mod:`bagport.dataset.write`) then reads only these results and the staged summaries and stats.
 
-Data files are one item: LeRobot rotates them by their size on disk as they are written, which is only
-known while writing, and they hold no video (a small share of the bytes). Each video file is an item.
+Data files are one item: LeRobot rotates them by their size on disk as they are written. That size is
+the sum of the episodes' encoded row groups (a row group's bytes do not depend on where in the file it
+goes), but an episode's row group bytes depend on its final ``index`` values (snappy over them: a few
+bytes either way), so an exact plan would have to encode every episode's table once more before the
+write, reading every staged frame table; a plan from staged sizes or a bytes-per-row bound would not be
+LeRobot's rule (docs/fleet.md). They hold no video (a small share of the bytes). Each video file is an item.
 """
 
 from __future__ import annotations

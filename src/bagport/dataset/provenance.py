@@ -76,29 +76,45 @@ def write_provenance(
     path = root / PROVENANCE_PATH.format(chunk_index=chunk, file_index=file)
     path.parent.mkdir(parents=True, exist_ok=True)
     writer: pq.ParquetWriter | None = None
+    pending: list[pa.Table] = []
     try:
         for episode_index, (summary, placement) in enumerate(
             zip(summaries, data, strict=True), first_episode
         ):
-            fs, staged = url_to_fs(summary.file(PROVENANCE_FILE))
-            with fs.open(staged, "rb") as handle:
-                table = pq.read_table(handle)
-            frame_index = table.column("frame_index").to_numpy()
-            table = table.add_column(
-                0, "index", pa.array(placement.from_index + frame_index.astype(np.int64))
-            )
-            table = table.add_column(
-                0, "episode_index", pa.array(np.full(table.num_rows, episode_index, np.int64))
-            )
+            pending.append(_episode_rows(summary, placement, episode_index))
             if writer is None:
-                writer = pq.ParquetWriter(path, table.schema, compression="zstd")
-            writer.write_table(table)
+                writer = pq.ParquetWriter(path, pending[0].schema, compression="zstd")
+            if sum(t.num_rows for t in pending) >= PROVENANCE_GROUP_ROWS:
+                _write_group(writer, pending)
+        if writer is not None and pending:
+            _write_group(writer, pending)
     finally:
         if writer is not None:
             writer.close()
     if record:
         episodes = (episode_provenance(s, i) for i, s in enumerate(summaries, first_episode))
         write_run_record(root / run_record_path(base), run_record, episodes, {})
+
+
+PROVENANCE_GROUP_ROWS = 4_096
+"""Provenance rows per row group (several episodes each: a writer keeps every row group's metadata until
+it closes, so one row group per episode would grow the commit's memory with the number of episodes)."""
+
+
+def _episode_rows(summary: EpisodeSummary, placement: DataPlacement, episode_index: int) -> pa.Table:
+    fs, staged = url_to_fs(summary.file(PROVENANCE_FILE))
+    with fs.open(staged, "rb") as handle:
+        table = pq.read_table(handle)
+    frame_index = table.column("frame_index").to_numpy()
+    table = table.add_column(0, "index", pa.array(placement.from_index + frame_index.astype(np.int64)))
+    return table.add_column(0, "episode_index", pa.array(np.full(table.num_rows, episode_index, np.int64)))
+
+
+def _write_group(writer: pq.ParquetWriter, pending: list[pa.Table]) -> None:
+    """The pending episodes' rows as one row group (their dictionaries unified); empties ``pending``."""
+    group = pa.concat_tables(pending).unify_dictionaries().combine_chunks()
+    writer.write_table(group, row_group_size=max(1, group.num_rows))
+    pending.clear()
 
 
 def _nested(value: Any, level: int) -> str:

@@ -12,11 +12,12 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+import pyarrow.parquet as pq
 import pytest
 
 from bagport.dataset import DatasetLimits, write_dataset
 from bagport.dataset.data_files import DataPlacement
-from bagport.dataset.layout import SKETCHES_PATH
+from bagport.dataset.layout import PROVENANCE_PATH, SKETCHES_PATH
 from bagport.dataset.meta import load_episode_stats
 from bagport.dataset.sketches import DatasetSketches
 from bagport.dataset.validate import validate_dataset
@@ -177,3 +178,20 @@ def test_an_episode_staged_before_sketches_is_sketched_from_its_staged_frames(
         for kind in ("values", "steps"):
             mine, theirs = getattr(current, kind)[key], getattr(legacy, kind)[key]
             assert mine.to_json() == theirs.to_json(), (key, kind)
+
+
+def test_meta_row_groups_hold_many_episodes_and_lerobot_loads_them(
+    staged: tuple[list[EpisodeSummary], list[EpisodeSummary]], tmp_path: Path
+) -> None:
+    """A writer keeps every row group's metadata until it closes: ``meta/episodes`` and the provenance
+    rows go in row groups of many episodes (the commit's memory stays flat), and LeRobot loads them."""
+    first, _ = staged
+    out = tmp_path / "ds"
+    write_dataset(first * 4, str(out), robot_type="r")
+    episodes = pq.read_metadata(out / "meta/episodes/chunk-000/file-000.parquet")
+    assert [episodes.row_group(n).num_rows for n in range(episodes.num_row_groups)] == [10, 20, 2]
+    provenance = pq.ParquetFile(out / PROVENANCE_PATH.format(chunk_index=0, file_index=0))
+    assert provenance.metadata.num_row_groups < len(first) * 4
+    index = provenance.read(columns=["episode_index"]).column("episode_index").to_numpy()
+    assert np.all(np.diff(index) >= 0) and sorted(set(index.tolist())) == list(range(len(first) * 4))
+    assert validate_dataset(out, decode_every=50).episodes == 4 * len(first)

@@ -196,34 +196,34 @@ def measure_dask(staged: list[EpisodeSummary], out: Path, workers: Sequence[int]
     return rows
 
 
-def _table(title: str, header: list[str], rows: list[str]) -> list[str]:
-    """A titled markdown table, then a blank line."""
-    return [title, "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header), *rows, ""]
+_TABLES: dict[str, tuple[str, list[str], str]] = {
+    "append": (
+        f"Appending {NEW} one-second episodes (W4's shape):",
+        ["dataset before", "append wall s (median of 3)", "existing data/video files",
+         "opens/reads of them (all runs)", "load avg (1 min, max)"],
+        "| {base} episodes | {wall_s:.2f} | {old_files} | {opens} | {load:.1f} |",
+    ),
+    "commit": (
+        "The commit step alone, in a fresh process:",
+        ["episodes written", "commit wall s", "RSS before (imports) MB", "peak RSS MB", "load avg (1 min)"],
+        "| {episodes} | {wall_s:.2f} | {before_mb:.0f} | {peak_mb:.0f} | {load:.1f} |",
+    ),
+    "dask": (
+        "The reduce of W1 (staged once) on a local Dask cluster:",
+        ["workers", "reduce wall s", "output files (tasks)", "load avg (1 min)"],
+        "| {workers} | {wall_s:.2f} | {files} | {load:.1f} |",
+    ),
+}  # fmt: skip
+"""Each part's table: title, header, row format."""
 
 
 def _tables(results: dict[str, list[dict[str, float]]]) -> str:
     lines: list[str] = []
-    if "append" in results:
-        lines += _table(
-            f"Appending {NEW} one-second episodes (W4's shape):",
-            ["dataset before", "append wall s (median of 3)", "existing data/video files",
-             "opens/reads of them (all runs)", "load avg (1 min, max)"],
-            [f"| {r['base']} episodes | {r['wall_s']:.2f} | {r['old_files']} | {r['opens']} | {r['load']:.1f} |"
-             for r in results["append"]],
-        )  # fmt: skip
-    if "commit" in results:
-        lines += _table(
-            "The commit step alone, in a fresh process:",
-            ["episodes written", "commit wall s", "RSS before (imports) MB", "peak RSS MB", "load avg (1 min)"],
-            [f"| {r['episodes']} | {r['wall_s']:.2f} | {r['before_mb']:.0f} | {r['peak_mb']:.0f} | {r['load']:.1f} |"
-             for r in results["commit"]],
-        )  # fmt: skip
-    if "dask" in results:
-        lines += _table(
-            "The reduce of W1 (staged once) on a local Dask cluster:",
-            ["workers", "reduce wall s", "output files (tasks)", "load avg (1 min)"],
-            [f"| {r['workers']} | {r['wall_s']:.2f} | {r['files']} | {r['load']:.1f} |" for r in results["dask"]],
-        )  # fmt: skip
+    for part, (title, header, row) in _TABLES.items():
+        if part in results:
+            lines += [title, "", "| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+            lines += [row.format(**r) for r in results[part]]
+            lines.append("")
     return "\n".join(lines)
 
 

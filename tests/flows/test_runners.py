@@ -4,10 +4,8 @@ and the flow's runner, a duplicate, converts in them; without a flow the pool st
 from __future__ import annotations
 
 import os
-from typing import Any
 
 from prefect import flow, task
-from prefect.task_runners import TaskRunner
 
 from flows.runners import EarlyProcessPoolTaskRunner, prefect_api
 
@@ -31,11 +29,10 @@ def test_the_flow_runs_its_tasks_in_the_workers_started_before_it() -> None:
     runner = EarlyProcessPoolTaskRunner(max_workers=2)
     runner.start_early()
     early = _early_pids(runner)
-    as_given: TaskRunner[Any] = runner  # as run_config passes it
     try:
         with prefect_api():
-            first = _pids.with_options(task_runner=as_given)(4)
-            second = _pids.with_options(task_runner=as_given)(2)  # a second run: a pool of its own
+            first = _pids.with_options(task_runner=runner)(4)
+            second = _pids.with_options(task_runner=runner)(2)  # a second run: a pool of its own
     finally:
         runner.close_early()
     assert len(early) == 2

@@ -10,7 +10,7 @@ from prefect import flow, get_run_logger
 from prefect.client.schemas.objects import State
 from prefect.futures import PrefectFuture, as_completed
 from prefect.states import Failed
-from prefect.task_runners import TaskRunner, ThreadPoolTaskRunner
+from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
 
 from bagport.bags import source_stamp
 from bagport.config import ConvertConfig
@@ -26,14 +26,7 @@ from bagport.segment import SegmentedBag, segments_bags
 from flows.artifacts import Progress, publish_run_artifacts
 from flows.reduce import reduce_dataset
 from flows.run_story import completed_state
-from flows.runners import (
-    EarlyProcessPoolTaskRunner,
-    RayMissingError,
-    ServerDownError,
-    dask_runner,
-    prefect_api,
-    ray_runner,
-)
+from flows.runners import RayMissingError, ServerDownError, dask_runner, prefect_api, ray_runner
 from tasks.episode import convert_batch_task, convert_episode_task
 from tasks.plan import plan_task
 from tasks.segment import segment_bag_task
@@ -325,23 +318,20 @@ def _cancel_ray(ref: Any) -> bool:
     return True
 
 
-def task_runner(config: ConvertConfig) -> TaskRunner[Any]:
-    """The config's task runner for the episodes."""
-    workers = config.workers or os.cpu_count() or 1
-    if config.runner == "dask":
-        return dask_runner(config, workers)
-    if config.runner == "ray":
-        return ray_runner(config, workers)
-    if config.runner == "process" and workers > 1:
-        return EarlyProcessPoolTaskRunner(max_workers=workers)
-    return ThreadPoolTaskRunner(max_workers=workers)
-
-
-def run_config(config: ConvertConfig, runner: TaskRunner[Any] | None = None) -> DatasetReport:
+def run_config(config: ConvertConfig) -> DatasetReport:
     """Run the conversion flow (or subflow, inside a deployment's flow) with the config's task runner."""
-    if runner is None:
-        runner = task_runner(config)
-    flow_with_runner = convert_flow.with_options(task_runner=runner)
+    workers = config.workers or os.cpu_count() or 1
+    runner: TaskRunner[Any]
+    if config.runner == "dask":
+        runner = dask_runner(config, workers)
+    elif config.runner == "ray":
+        runner = ray_runner(config, workers)
+    elif config.runner == "process" and workers > 1:
+        runner = ProcessPoolTaskRunner(max_workers=workers)
+    else:
+        runner = ThreadPoolTaskRunner(max_workers=workers)
+    # Prefect types task_runner as TaskRunner[PrefectFuture]; every runner is, but not in its stubs.
+    flow_with_runner = convert_flow.with_options(task_runner=runner)  # type: ignore[arg-type]
     state = flow_with_runner(config, return_state=True)
     if not state.is_completed():
         # bagport's own errors arrive typed, as the state's data; anything else is a bug or a crash
@@ -376,13 +366,8 @@ def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetRe
     then run against the configured API (or one temporary local server) with that plan."""
     # bad manifests, contracts and outputs fail here, before Prefect starts
     _CHECKED[:] = [plan if plan is not None else plan_run(config)]
-    runner = task_runner(config)
-    if isinstance(runner, EarlyProcessPoolTaskRunner):
-        runner.start_early()  # the workers spawn and import while the server boots
     try:
         with prefect_api():
-            return run_config(config, runner)
+            return run_config(config)
     finally:
         _CHECKED.clear()
-        if isinstance(runner, EarlyProcessPoolTaskRunner):
-            runner.close_early()

@@ -2,31 +2,21 @@
 
 from __future__ import annotations
 
-import multiprocessing
 import os
-import threading
 from collections.abc import Iterator
-from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from contextlib import contextmanager
-from typing import Any, Self
+from typing import Any
 
 from prefect.events.worker import EventsWorker
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
-from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, _initialize_process_pool_worker
+from prefect.task_runners import TaskRunner
 
 from bagport.config import ConvertConfig
 from bagport.errors import BagportError
 from flows.local_server import ServerUnreachableError, check_reachable, take_launched
 
-__all__ = [
-    "EarlyProcessPoolTaskRunner",
-    "RayMissingError",
-    "ServerDownError",
-    "dask_runner",
-    "prefect_api",
-    "ray_runner",
-]
+__all__ = ["RayMissingError", "ServerDownError", "dask_runner", "prefect_api", "ray_runner"]
 
 
 @contextmanager
@@ -148,64 +138,3 @@ def ray_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
             init_kwargs={"address": "local", "num_cpus": workers, "num_gpus": 0, "include_dashboard": False}
         )
     return runner
-
-
-def _import_episode_task() -> None:
-    """Run in each new worker: import what an episode task needs while the flow process waits."""
-    import tasks.episode  # noqa: F401, PLC0415 - the import is the point
-
-
-class EarlyProcessPoolTaskRunner(ProcessPoolTaskRunner):
-    """Prefect's process pool, whose worker processes can start before the flow does.
-
-    Each spawned worker imports Prefect and bagport (about 2 s here) before its first episode;
-    :meth:`start_early` spawns them and imports the episode task while the temporary server
-    boots, and the flow's runner (a :meth:`duplicate`) adopts that pool once. Without
-    :meth:`start_early`, or on a second flow run, it is Prefect's runner unchanged.
-    """
-
-    def __init__(self, max_workers: int | None = None) -> None:
-        super().__init__(max_workers=max_workers)
-        self._early: list[tuple[Any, ProcessPoolExecutor]] = []  # shared with duplicates
-
-    def duplicate(self) -> Self:
-        copy = super().duplicate()
-        copy._early = self._early
-        return copy
-
-    def start_early(self) -> None:
-        """Spawn the workers now, each importing the episode task."""
-        spawn = multiprocessing.get_context("spawn")
-        queue = spawn.Queue()  # the workers' events and logs, forwarded once a flow adopts the pool
-        executor = ProcessPoolExecutor(
-            max_workers=self._max_workers,
-            mp_context=spawn,
-            initializer=_initialize_process_pool_worker,
-            initargs=(queue, None, ()),
-        )
-        for _ in range(self._max_workers):  # one spawn per submit while no worker idles
-            executor.submit(_import_episode_task)
-        self._early.append((queue, executor))
-
-    def close_early(self) -> None:
-        """Stop a pool no flow adopted (the run failed before its flow started)."""
-        while self._early:
-            queue, executor = self._early.pop()
-            executor.shutdown(cancel_futures=True, wait=True)
-            queue.close()
-
-    def __enter__(self) -> Self:
-        if not self._early:
-            return super().__enter__()
-        queue, executor = self._early.pop()
-        TaskRunner.__enter__(self)
-        self._subprocess_message_queue = queue
-        self._executor = executor
-        self._message_forwarding_thread = threading.Thread(
-            target=self._forward_subprocess_messages,
-            name="ProcessPoolTaskRunnerMessageForwarder",
-            daemon=True,
-        )
-        self._message_forwarding_thread.start()
-        self._resolver_executor = ThreadPoolExecutor(max_workers=self._max_workers)
-        return self

@@ -24,6 +24,7 @@ import shutil
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 from importlib.metadata import version
 from pathlib import Path
@@ -79,18 +80,22 @@ def measure(command: list[str], out: Path, *, fresh: bool = True) -> dict[str, f
         shutil.rmtree(out.with_name(out.name + ".staging"), ignore_errors=True)
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     started = time.perf_counter()
-    proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
-    peak, peak_process, peak_root = 0, 0, 0
-    while proc.poll() is None:
-        try:
-            rss = [p.memory_info().rss for p in [proc, *proc.children(recursive=True)] if p.is_running()]
-            peak, peak_process = max(peak, sum(rss)), max(peak_process, *rss)
-            peak_root = max(peak_root, proc.memory_info().rss)
-        except (psutil.Error, ValueError):
-            pass
-        time.sleep(0.2)
-    wall = time.perf_counter() - started
-    stderr = proc.stderr.read().decode(errors="replace") if proc.stderr else ""
+    # stderr into a file, not a pipe read at the end: the encoder's banners (SVT_LOG unset) and the
+    # workers' logs fill a pipe's 64 KB and block the run
+    with tempfile.TemporaryFile() as log:
+        proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=log)
+        peak, peak_process, peak_root = 0, 0, 0
+        while proc.poll() is None:
+            try:
+                rss = [p.memory_info().rss for p in [proc, *proc.children(recursive=True)] if p.is_running()]
+                peak, peak_process = max(peak, sum(rss)), max(peak_process, *rss)
+                peak_root = max(peak_root, proc.memory_info().rss)
+            except (psutil.Error, ValueError):
+                pass
+            time.sleep(0.2)
+        wall = time.perf_counter() - started
+        log.seek(0)
+        stderr = log.read().decode(errors="replace")
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if proc.returncode != 0:
         raise RuntimeError(f"{command[:3]} failed ({proc.returncode}):\n{stderr[-3000:]}")

@@ -57,3 +57,15 @@ def test_bench_smoke_run_writes_a_report_and_comparable_datasets(tmp_path: Path)
         assert abs(length["ours"] - length["theirs"]) <= 1, length
     last = ours[len(ours) - 1]
     assert tuple(last["observation.images.front"].shape) == (3, 96, 128)
+
+
+def test_measure_survives_a_run_that_writes_more_than_a_pipe_holds_to_stderr(tmp_path: Path) -> None:
+    """An encoder banner per episode once filled the unread stderr pipe and hung the run."""
+    from bench.run import measure  # noqa: PLC0415 - bench is not a dependency of the other tests
+
+    noisy = [sys.executable, "-c", "import sys; sys.stderr.write('x' * 1_000_000)"]
+    measured = measure(noisy, tmp_path / "out")
+    assert measured["wall_s"] > 0
+    failing = [sys.executable, "-c", "import sys; sys.stderr.write('y' * 1_000_000 + 'the end'); sys.exit(3)"]
+    with pytest.raises(RuntimeError, match=r"(?s)failed \(3\):\n.*the end$"):
+        measure(failing, tmp_path / "out")

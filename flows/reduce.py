@@ -52,7 +52,12 @@ def reduce_dataset(
         if isinstance(start, DatasetReport):  # nothing kept: the exclusions are recorded
             return start
         with open_write(
-            start.kept, config.output, limits=start.limits, overwrite=config.overwrite, append=config.append
+            start.kept,
+            config.output,
+            limits=start.limits,
+            overwrite=config.overwrite,
+            append=config.append,
+            repaired=True,  # by plan_run, at the start of this run: recovery runs once per run
         ) as session:
             get_run_logger().info("writing %d output file(s)", len(session.plan.files))
             futures = [

@@ -344,3 +344,32 @@ def test_without_a_prefect_api_an_up_to_date_run_starts_no_flow(
     lines = capsys.readouterr().err.strip().splitlines()
     assert lines[0].startswith(f"up to date: 2 episode(s) reused, nothing to write at {out}")
     assert lines[1].startswith(f"nothing to do: every bag is in {out} already (2 episode(s)")
+
+
+def test_a_cli_run_recovers_the_output_once(
+    prefect: None, bags: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """Publish recovery (the journal's repair) runs once per run: when the run is planned, not again
+    when the dataset is written (``flows/reduce.py`` opens the write with ``repaired=True``)."""
+    import bagport.dataset.repair  # noqa: PLC0415
+    import bagport.dataset.session  # noqa: PLC0415
+    import bagport.run  # noqa: PLC0415
+
+    calls: list[str] = []
+    real = bagport.dataset.repair.repair_dataset
+
+    def counting(output: str, **options: Any) -> Any:
+        calls.append(output)
+        return real(output, **options)
+
+    monkeypatch.setattr(bagport.run, "repair_dataset", counting)
+    monkeypatch.setattr(bagport.dataset.session, "repair_dataset", counting)
+    manifest = _manifest(bags, "once", [(4, "alice")])
+    out = tmp_path / "ds"
+    code = main([
+        "convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--output", str(out),
+        "--staging", str(tmp_path / "staging"), "--runner", "thread", "--workers", "1", "--quiet",
+    ])  # fmt: skip
+    assert code == 0
+    assert calls == [str(out)]
+    assert (out / "meta" / "info.json").is_file()

@@ -120,11 +120,14 @@ def open_write(
     limits: DatasetLimits | None = None,
     overwrite: bool = False,
     append: bool = False,
+    repaired: bool = False,
 ) -> Iterator[WriteSession]:
-    """Repair ``output``, plan the files, and hold a build location while the block runs; whatever the
-    block did not commit is removed when it ends (see the module docstring)."""
+    """Repair ``output`` (unless the caller did already in this run: ``repaired``), plan the files, and
+    hold a build location while the block runs; whatever the block did not commit is removed when it
+    ends (see the module docstring)."""
     fs, out_path = url_to_fs(output)
-    repair_dataset(output)  # once per write: the commit does not repair again
+    if not repaired:
+        repair_dataset(output)  # once per write: the commit does not repair again
     fs.invalidate_cache()
     features = check_consistent(summaries)
     appending = append and bool(fs.exists(out_path))

@@ -94,6 +94,7 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     import pydantic  # noqa: PLC0415
 
     from bagport.dataset.history import dataset_report  # noqa: PLC0415
+    from bagport.qa import episode_ref  # noqa: PLC0415
     from bagport.reduce import finish_up_to_date, summary_json  # noqa: PLC0415
     from bagport.run import plan_run  # noqa: PLC0415
 
@@ -127,8 +128,10 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
             print(f"wrote {fmt} at {output}", file=sys.stderr)
     wall_s = time.perf_counter() - started
     for row in report.excluded:
-        where = row.bag_uri + ("" if row.segment is None else f"#{row.segment}")
-        print(f"excluded bags[{row.manifest_entry}] {where}: {row.reason}", file=sys.stderr)
+        print(
+            f"excluded bags[{row.manifest_entry}] {episode_ref(row.bag_uri, row.segment)}: {row.reason}",
+            file=sys.stderr,
+        )
     print(_summary_line(report, args.append, wall_s), file=sys.stderr)
     if args.push_to_hub:
         push_from_args(report.outputs.get("lerobot", report.root), config.resolved_repo_id(), args)
@@ -177,6 +180,7 @@ def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
 
 def _cmd_qa(args: argparse.Namespace) -> int:
     from bagport.episode.score import score_manifest  # noqa: PLC0415
+    from bagport.qa import episode_ref  # noqa: PLC0415
 
     entries = score_manifest(
         args.manifest,
@@ -188,7 +192,7 @@ def _cmd_qa(args: argparse.Namespace) -> int:
     )
     for entry in entries:
         qa = entry.qa
-        where = qa.bag_uri + ("" if entry.segment is None else f"#{entry.segment}")
+        where = episode_ref(qa.bag_uri, entry.segment)
         label = f" ({entry.label})" if entry.label else ""
         reason = f"excluded: {entry.excluded_reason}" if entry.by_label else qa.headline()
         print(f"{qa.verdict:4s} {qa.score:.2f}  bags[{entry.manifest_entry}] {where}{label}: {reason}")

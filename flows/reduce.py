@@ -27,7 +27,7 @@ from bagport.episode.staged import PlannedEpisode
 from bagport.errors import BagportError
 from bagport.reduce import commit_reduce, start_reduce
 from bagport.run import EpisodeFailure, RunPlan
-from tasks.reduce import log_report, reduce_task, write_file_task
+from tasks.reduce import failed_with, log_report, reduce_task, write_file_task
 
 __all__ = ["reduce_dataset"]
 
@@ -79,7 +79,6 @@ def reduce_dataset(
             )
             report = commit_reduce(plan, staged, failures, start, lerobot)
     except BagportError as err:  # a staged episode gone, a dataset that may not be replaced, the commit
-        get_run_logger().error("%s", err)
-        return Failed(message=str(err), data=err)
+        return failed_with(err)
     log_report(report)
     return report

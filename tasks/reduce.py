@@ -16,12 +16,13 @@ from bagport.errors import BagportError
 from bagport.reduce import reduce_run
 from bagport.run import EpisodeFailure, RunPlan
 
-__all__ = ["log_report", "reduce_task", "write_file_task"]
+__all__ = ["failed_with", "log_report", "reduce_task", "write_file_task"]
 
 
-def _failed(err: BagportError) -> State[Any]:
+def failed_with(err: BagportError) -> State[Any]:
+    """The Failed state carrying bagport's error (logged): its type decides the CLI's exit code."""
     get_run_logger().error("%s", err)
-    return Failed(message=str(err), data=err)  # the error's type decides the CLI's exit code
+    return Failed(message=str(err), data=err)
 
 
 def log_report(report: DatasetReport) -> None:
@@ -46,7 +47,7 @@ def reduce_task(
     try:
         report = reduce_run(plan, staged, failures)
     except BagportError as err:
-        return _failed(err)
+        return failed_with(err)
     log_report(report)
     return report
 
@@ -57,4 +58,4 @@ def write_file_task(plan: FilePlan, item: PlannedFile, build: str) -> WrittenFil
     try:
         return write_planned_file(plan, item, build)
     except BagportError as err:
-        return _failed(err)
+        return failed_with(err)

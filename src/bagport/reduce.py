@@ -20,7 +20,7 @@ from bagport.dataset.history import dataset_report, record_exclusions
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import DatasetWriteError
 from bagport.formats import write_formats
-from bagport.qa import QAEntry
+from bagport.qa import QAEntry, episode_ref
 from bagport.run import RunPlan, up_to_date, write_key
 from bagport.segment import kept_segmentation
 from bagport.selection import EpisodeFailure, select_episodes
@@ -43,13 +43,13 @@ def finish_up_to_date(plan: RunPlan) -> DatasetReport:
     none converted; the staged episodes are removed unless ``keep_staging`` (as a write would)."""
     if not plan.config.keep_staging:
         _remove_staged(plan, [e.dir_uri for e in plan.reused])
-    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in plan.reused)
+    reused = tuple(episode_ref(e.bag_uri, e.segment) for e in plan.reused)
     report = dataset_report(plan.config.output)
     return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs())
 
 
 def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str, Any]:
-    reused = [_episode_name(e.bag_uri, e.segment) for e in staged if e.reused]
+    reused = [episode_ref(e.bag_uri, e.segment) for e in staged if e.reused]
     return {
         "bagport_version": __version__,
         "repo_id": plan.config.resolved_repo_id(),
@@ -66,14 +66,11 @@ def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str
     }
 
 
-def _episode_name(bag_uri: str, segment: int | None) -> str:
-    return bag_uri if segment is None else f"{bag_uri}#{segment}"
-
-
 @dataclass(frozen=True, slots=True)
 class ReduceStart:
     """What the reduce writes: the kept episodes (with what the plan decides about each), every bag's QA
-    entry, the run record and the size limits; small and serialisable (it travels to the commit task)."""
+        entry, the run record and the size limits. It stays in the flow's process, from the selection to the
+    commit (``flows/reduce.py``): only the file writers' small values go to the workers."""
 
     kept: tuple[EpisodeSummary, ...]
     entries: tuple[QAEntry, ...]
@@ -148,7 +145,7 @@ def commit_reduce(
     report = replace(lerobot or others[formats[0]], outputs=plan.config.format_outputs())
     if not plan.config.keep_staging:
         _remove_staged(plan, [e.dir_uri for e in staged])
-    reused = tuple(_episode_name(e.bag_uri, e.segment) for e in staged if e.reused)
+    reused = tuple(episode_ref(e.bag_uri, e.segment) for e in staged if e.reused)
     return replace(report, converted=len(staged) + len(failures) - len(reused), reused=reused)
 
 

@@ -14,6 +14,7 @@ from typing import Any
 from pydantic import JsonValue
 
 from bagport.qa.config import QAConfig
+from bagport.qa.result import episode_name
 from bagport.timewindow import WHOLE_BAG, TimeWindow
 from bagport.video.settings import EncoderSettings
 
@@ -49,8 +50,7 @@ class EpisodeRequest:
     @property
     def name(self) -> str:
         """The bag's file name, with ``#<segment>`` for one episode of several in a bag."""
-        stem = self.bag_uri.rstrip("/").rsplit("/", 1)[-1]
-        return stem if self.segment is None else f"{stem}#{self.segment}"
+        return episode_name(self.bag_uri, self.segment)
 
     def for_window(
         self, segment: int, window: TimeWindow, label: str | None, note: str, episode_id: str = ""

@@ -7,7 +7,17 @@ or ``bagport qa`` without converting) lives in :mod:`bagport.episode.quality`.
 from __future__ import annotations
 
 from bagport.qa.config import Gate, QAConfig, load_qa_config
-from bagport.qa.result import CheckResult, EpisodeQA, QABrief, QAEntry, Verdict, judge, score_checks
+from bagport.qa.result import (
+    CheckResult,
+    EpisodeQA,
+    QABrief,
+    QAEntry,
+    Verdict,
+    episode_name,
+    episode_ref,
+    judge,
+    score_checks,
+)
 from bagport.qa.streams import StreamStamps, stream_checks
 from bagport.qa.sync import AlignedStamps, alignment_checks, sync_checks
 from bagport.qa.values import ValueMonitor
@@ -23,6 +33,8 @@ __all__ = [
     "StreamStamps",
     "ValueMonitor",
     "Verdict",
+    "episode_name",
+    "episode_ref",
     "alignment_checks",
     "judge",
     "load_qa_config",

@@ -16,6 +16,8 @@ __all__ = [
     "QABrief",
     "QAEntry",
     "Verdict",
+    "episode_name",
+    "episode_ref",
     "judge",
     "score_checks",
 ]
@@ -134,9 +136,14 @@ class EpisodeQA:
         return cls(**{**data, "checks": checks})
 
 
-def _episode_name(bag_uri: str, segment: int | None) -> str:
-    stem = bag_uri.rstrip("/").rsplit("/", 1)[-1]
-    return stem if segment is None else f"{stem}#{segment}"
+def episode_ref(bag_uri: str, segment: int | None) -> str:
+    """A bag (URI or name), with ``#<segment>`` for one episode of several in a bag."""
+    return bag_uri if segment is None else f"{bag_uri}#{segment}"
+
+
+def episode_name(bag_uri: str, segment: int | None) -> str:
+    """The bag's file name, with ``#<segment>`` for one episode of several in a bag."""
+    return episode_ref(bag_uri.rstrip("/").rsplit("/", 1)[-1], segment)
 
 
 @dataclass(frozen=True, slots=True)
@@ -162,7 +169,7 @@ class QAEntry:
     @property
     def name(self) -> str:
         """The bag's file name, with ``#<segment>`` for one of several episodes in a bag."""
-        return _episode_name(self.qa.bag_uri, self.segment)
+        return episode_name(self.qa.bag_uri, self.segment)
 
     @property
     def reason(self) -> str:
@@ -223,7 +230,7 @@ class QABrief:
     @property
     def name(self) -> str:
         """The bag's file name, with ``#<segment>`` for one of several episodes in a bag."""
-        return _episode_name(self.bag_uri, self.segment)
+        return episode_name(self.bag_uri, self.segment)
 
     def to_json(self) -> dict[str, Any]:
         row = asdict(self)

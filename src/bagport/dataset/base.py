@@ -26,7 +26,7 @@ from bagport.dataset.sketches import DatasetSketches, read_sketches
 from bagport.errors import DatasetWriteError
 from bagport.stats import FeatureStats, stats_from_json
 
-__all__ = ["DatasetBase", "read_base"]
+__all__ = ["DatasetBase", "read_base", "record_string", "record_tail"]
 
 _CHUNK_FILE = re.compile(r"chunk-(\d+)/file-(\d+)\.\w+$")
 
@@ -85,18 +85,34 @@ _TOP_FILES = b'\n  "files": '
 top-level key is the only text at two spaces' indent, strings hold no raw newline)."""
 
 
-def _record_files(raw: bytes) -> dict[str, str] | None:
-    """A run record's ``files`` (the digests, after its episodes): only its tail is parsed, so an append
-    after a large run does not parse every episode's entry; any other layout is parsed whole."""
+def record_tail(raw: bytes) -> dict[str, Any]:
+    """A run record's ``files`` (the digests, after its episodes) and ``files_complete``: only its tail is
+    parsed, so reading the record of a large run does not parse every episode's entry; any other layout
+    is parsed whole."""
     at = raw.rfind(_TOP_FILES)
     if at >= 0:
         try:
-            files: dict[str, str] | None = json.loads(b"{" + raw[at + 1 :]).get("files")
-            return files
+            tail: dict[str, Any] = json.loads(b"{" + raw[at + 1 :])
+            return tail
         except json.JSONDecodeError:
             pass
-    whole: dict[str, str] | None = json.loads(raw).get("files")
-    return whole
+    whole: dict[str, Any] = json.loads(raw)
+    return {key: whole[key] for key in ("files", "files_complete") if key in whole}
+
+
+def record_string(raw: bytes, key: str) -> str | None:
+    """A top-level string ``key`` of a run record, read from its own line (no parse of the rest);
+    ``None`` when the record has no such string."""
+    marker = b'\n  "' + key.encode() + b'": '
+    at = raw.find(marker)
+    if at < 0:
+        return None
+    line = raw[at + len(marker) : raw.find(b"\n", at + len(marker))].rstrip(b",")
+    try:
+        value = json.loads(line)
+    except json.JSONDecodeError:
+        return None
+    return value if isinstance(value, str) else None
 
 
 def read_base(root: str | Path) -> DatasetBase:
@@ -125,7 +141,7 @@ def read_base(root: str | Path) -> DatasetBase:
     if newest is not None:
         with fs.open(newest, "rb") as handle:
             raw = handle.read()
-        files = _record_files(raw)
+        files = record_tail(raw).get("files")
         if files is not None:
             files = {**files, str(newest)[len(path) + 1 :]: hashlib.sha256(raw).hexdigest()}
     return DatasetBase(

@@ -8,7 +8,7 @@ from typing import Any
 import pandas as pd
 from fsspec.core import url_to_fs
 
-from bagport.dataset.base import read_base
+from bagport.dataset.base import read_base, record_string, record_tail
 from bagport.dataset.checksums import latest_record
 from bagport.dataset.layout import (
     APPEND_RUN_RECORD_PATH,
@@ -89,11 +89,12 @@ def recorded_write_key(root: str) -> str | None:
         return None
     if latest_record([p for p in listed if p.startswith("meta/provenance/")]) != RUN_RECORD_PATH:
         return None
-    with fs.open(f"{base}/{RUN_RECORD_PATH}", "r", encoding="utf-8") as handle:
-        record = json.load(handle)
-    key = record.get("write_key")
-    files = set(record.get("files", {}))
-    if not isinstance(key, str) or not files or not record.get("files_complete", False):
+    with fs.open(f"{base}/{RUN_RECORD_PATH}", "rb") as handle:
+        raw = handle.read()
+    key = record_string(raw, "write_key")
+    tail = record_tail(raw)  # the record's episodes are not parsed
+    files = set(tail.get("files", {}))
+    if key is None or not files or not tail.get("files_complete", False):
         return None
     readable = {p for p in listed if p.startswith(("data/", "videos/"))}
     if not files <= listed or not readable <= files:

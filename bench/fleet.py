@@ -9,7 +9,12 @@ Phases, each a fresh ``bagport convert`` process tree measured by :func:`bench.r
   key is the plan's, so nothing is converted or written ("up to date");
 - ``no-op append``: ``--append`` of the same manifest into the dataset: nothing new, nothing submitted;
 - ``touched re-run``: :data:`TOUCHED` bags' files get a new modification time, then ``--overwrite``:
-  exactly those convert again.
+  exactly those convert again;
+- ``no-op re-run 100``: the first 100 again with ``--overwrite`` (the issue's small-fleet re-run);
+- ``staged, new output 100``: the first 100 into a new output with their staging kept: nothing is
+  converted, but the whole dataset is written from the staged episodes (the reduce alone).
+
+Each phase is compared with the first run of the same bags (its baseline).
 """
 
 from __future__ import annotations
@@ -27,11 +32,14 @@ TOUCHED = 20
 SMALL = 100
 
 
-def _command(workload: Path, manifest: Path, out: Path, *extra: str) -> list[str]:
+def _command(
+    workload: Path, manifest: Path, out: Path, *extra: str, staging: Path | None = None
+) -> list[str]:
     bagport = str(Path(sys.executable).with_name("bagport"))
     return [
         bagport, "convert", "--manifest", str(manifest), "--contract", str(workload / "contract.yaml"),
-        "--output", str(out), "--staging", f"{out}.staging", "--keep-staging", "--codec", "lerobot-default",
+        "--output", str(out), "--staging", str(staging or f"{out}.staging"), "--keep-staging",
+        "--codec", "lerobot-default",
         "--on-qa-fail", "keep", "--quiet", *extra,
     ]  # fmt: skip
 
@@ -55,43 +63,56 @@ def measure_fleet(workload: Path, out_root: Path, episodes: int) -> dict[str, di
     small = workload / f"manifest-first-{SMALL}.yaml"
     bags = yaml.safe_load(manifest.read_text())["bags"]
     small.write_text(yaml.safe_dump({"bags": bags[:SMALL]}))
-    out = out_root / "W4-fleet"
-    phases: dict[str, tuple[list[str], int, bool]] = {
-        f"first {min(SMALL, episodes)}": (
-            _command(workload, small, out_root / "W4-small"),
-            min(SMALL, episodes),
-            True,
-        ),
-        "first": (_command(workload, manifest, out), episodes, True),
-        "no-op re-run": (_command(workload, manifest, out, "--overwrite"), episodes, False),
-        "no-op append": (_command(workload, manifest, out, "--append"), episodes, False),
+    out, out_small = out_root / "W4-fleet", out_root / "W4-small"
+    first_small = f"first {min(SMALL, episodes)}"
+    phases: dict[str, tuple[list[str], int, bool, str]] = {
+        first_small: (_command(workload, small, out_small), min(SMALL, episodes), True, first_small),
+        "first": (_command(workload, manifest, out), episodes, True, "first"),
+        "no-op re-run": (_command(workload, manifest, out, "--overwrite"), episodes, False, "first"),
+        "no-op append": (_command(workload, manifest, out, "--append"), episodes, False, "first"),
         f"touched re-run ({TOUCHED} bags)": (
             _command(workload, manifest, out, "--overwrite"),
             episodes,
             False,
+            "first",
+        ),
+        f"no-op re-run {min(SMALL, episodes)}": (
+            _command(workload, small, out_small, "--overwrite"),
+            min(SMALL, episodes),
+            False,
+            first_small,
+        ),
+        f"staged, new output {min(SMALL, episodes)}": (
+            _command(workload, small, out_root / "W4-small-new", staging=Path(f"{out_small}.staging")),
+            min(SMALL, episodes),
+            False,
+            first_small,
         ),
     }
     results: dict[str, dict[str, float]] = {}
-    for name, (command, count, fresh) in phases.items():
+    for name, (command, count, fresh, baseline) in phases.items():
         if name.startswith("touched"):
             _touch(workload, TOUCHED)
         measured = measure(command, Path(command[command.index("--output") + 1]), fresh=fresh)
         measured["episodes"] = count
+        measured["baseline"] = list(phases).index(baseline)
         results[name] = measured
         print(f"W4 {name}: {measured}", flush=True)
+    shutil.rmtree(out_root / "W4-small-new", ignore_errors=True)
     shutil.rmtree(out_root / "W4-small.staging", ignore_errors=True)
     return results
 
 
 def fleet_table(fleet: dict[str, dict[str, float]], description: str) -> str:
-    first = fleet.get("first", {})
+    names = list(fleet)
     lines = [
         f"**W4** ({description}; staging kept between runs)",
         "",
-        "| run | wall s | of first run | CPU s | of first run | wall s / episode | CPU s / episode | flow process peak RSS MB | peak RSS MB (tree) |",
+        "| run | wall s | of its first run | CPU s | of first run | wall s / episode | CPU s / episode | flow process peak RSS MB | peak RSS MB (tree) |",
         "|---|---|---|---|---|---|---|---|---|",
     ]  # fmt: skip
     for name, m in fleet.items():
+        first = fleet[names[int(m["baseline"])]] if "baseline" in m else fleet.get("first", {})
         share = {k: f"{100 * m[k] / first[k]:.1f}%" if first.get(k) else "" for k in ("wall_s", "cpu_s")}
         lines.append(
             f"| {name} | {m['wall_s']:.1f} | {share['wall_s']} | {m['cpu_s']:.1f} | {share['cpu_s']} | "

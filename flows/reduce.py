@@ -8,20 +8,30 @@ run here, in the flow's process, as library calls: the write holds the build fol
 store's intent record) from the first file to the commit and removes whatever was not committed when the
 block ends, and what they pass each other (every kept episode's summary and QA, the run record) stays in
 this process. Only the file writers' small typed values cross the task boundary.
+
+Where the file tasks run (:func:`_file_writers`): on Dask and Ray, the cluster's workers; with the local
+process pool, threads of the flow's process. A file task copies staged bytes (a remux, no decoding; a
+parquet concatenation), so a fresh pool worker's start-up (importing Prefect and bagport, 3-8 s on 2 cores)
+costs more than the writing itself, and a run with every episode staged has started no worker yet.
 """
 
 from __future__ import annotations
 
+import os
+from collections.abc import Iterator
+from contextlib import contextmanager
 from typing import Any
 
 from prefect import get_run_logger
 from prefect.client.schemas.objects import State
-from prefect.futures import wait
+from prefect.context import FlowRunContext
+from prefect.futures import PrefectFuture, wait
 from prefect.states import Failed
+from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
 
 from bagport.dataset import DatasetReport
 from bagport.dataset.commit import commit_write
-from bagport.dataset.files import WrittenFile
+from bagport.dataset.files import FilePlan, WrittenFile
 from bagport.dataset.session import open_write
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import BagportError
@@ -37,6 +47,28 @@ def _failed(state: State[Any], what: str) -> State[Any]:
     return Failed(
         message=state.message or f"{what} failed", data=error if isinstance(error, BagportError) else None
     )
+
+
+@contextmanager
+def _file_writers(workers: int) -> Iterator[TaskRunner[Any] | None]:
+    """``workers`` threads of this process when the flow runs on the local process pool, else ``None``:
+    the flow's own runner (Dask, Ray, threads)."""
+    context = FlowRunContext.get()
+    if context is None or not isinstance(context.task_runner, ProcessPoolTaskRunner):
+        yield None
+        return
+    threads: ThreadPoolTaskRunner[Any]
+    with ThreadPoolTaskRunner(max_workers=workers) as threads:
+        yield threads
+
+
+def _submit_writes(threads: TaskRunner[Any] | None, plan: FilePlan, build: str) -> list[PrefectFuture[Any]]:
+    if threads is None:
+        return [write_file_task.submit(plan, item, build) for item in plan.files]
+    return [
+        threads.submit(write_file_task, parameters={"plan": plan, "item": item, "build": build})
+        for item in plan.files
+    ]
 
 
 def reduce_dataset(
@@ -60,14 +92,13 @@ def reduce_dataset(
             repaired=True,  # by plan_run, at the start of this run: recovery runs once per run
         ) as session:
             get_run_logger().info("writing %d output file(s)", len(session.plan.files))
-            futures = [
-                write_file_task.submit(session.plan, item, session.build) for item in session.plan.files
-            ]
-            wait(futures)
+            with _file_writers(config.workers or os.cpu_count() or 1) as threads:
+                futures = _submit_writes(threads, session.plan, session.build)
+                wait(futures)
             for future in futures:
                 if not future.state.is_completed():
                     return _failed(future.state, "writing an output file")
-            written: list[WrittenFile] = [future.result() for future in futures]  # type: ignore[misc] # completed
+            written: list[WrittenFile] = [future.result() for future in futures]
             lerobot = commit_write(
                 session,
                 start.kept,

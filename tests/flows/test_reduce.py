@@ -1,21 +1,31 @@
 """The reduce as a map on a real Dask cluster of two worker processes: every output file is written by its
 own task on a worker (the task stream shows them), into the local build folder beside the output; the
 commit publishes, ``bagport validate`` passes and LeRobot loads every frame. An append on the cluster
-adds files without reading the old ones."""
+adds files without reading the old ones. On the local process pool, the file tasks run on threads of the
+flow's process: a run with every episode staged starts no pool worker."""
 
 from __future__ import annotations
 
+import asyncio
 import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import pytest
 from distributed import Client, LocalCluster, get_task_stream
+from prefect.client.orchestration import get_client
+from prefect.client.schemas.filters import FlowRunFilter, FlowRunFilterId
+from prefect.client.schemas.sorting import FlowRunSort
+from prefect.task_runners import ProcessPoolTaskRunner
 
+from bagport.config import ConvertConfig
 from bagport.synth import EpisodeSpec, write_episode_bag
+from flows.convert import run_config
+from flows.runners import prefect_api
 from tests.fsprobe import watch_opens
-from tests.helpers import REPO, SAMPLE_CONTRACT
+from tests.helpers import FAST_CODEC, REPO, SAMPLE_CONTRACT
 
 
 def _convert(tmp_path: Path, names: list[str], *extra: str) -> subprocess.CompletedProcess[str]:
@@ -64,3 +74,64 @@ def test_output_files_are_written_by_tasks_on_two_dask_workers(tmp_path: Path) -
     )  # fmt: skip
     assert check.returncode == 0, check.stdout + check.stderr
     assert "3 episode(s), 45 frames, 45 decoded through LeRobot" in check.stdout, check.stdout
+
+
+POOL_TASKS: list[str] = []
+"""Names of the tasks submitted to the process pool."""
+
+
+_POOL_SUBMIT = ProcessPoolTaskRunner.submit
+
+
+def _counting_submit(
+    self: ProcessPoolTaskRunner, task: Any, parameters: dict[str, Any], *args: Any, **kwargs: Any
+) -> Any:
+    """Prefect's process-pool submit, recording the task (the runner itself is pickled to its workers,
+    so it stays Prefect's class)."""
+    POOL_TASKS.append(str(task.name))
+    return _POOL_SUBMIT(self, task, parameters, *args, **kwargs)
+
+
+async def _latest_task_runs() -> list[str]:
+    async with get_client() as client:
+        run = (await client.read_flow_runs(sort=FlowRunSort.START_TIME_DESC, limit=1))[0]
+        tasks = await client.read_task_runs(flow_run_filter=FlowRunFilter(id=FlowRunFilterId(any_=[run.id])))
+        return sorted(t.name for t in tasks)
+
+
+@pytest.mark.slow
+def test_on_the_process_pool_files_are_written_by_threads_and_a_staged_run_starts_no_worker(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    for n in range(2):
+        write_episode_bag(tmp_path / f"ep{n}", "mcap", EpisodeSpec(duration_s=0.5, seed=n))
+    manifest = tmp_path / "manifest.yaml"
+    manifest.write_text("bags:\n" + "".join(f"  - uri: {tmp_path / f'ep{n}'}\n" for n in range(2)))
+    monkeypatch.setattr(ProcessPoolTaskRunner, "submit", _counting_submit)
+
+    def convert(out: str) -> list[str]:
+        POOL_TASKS.clear()
+        config = ConvertConfig(
+            manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output=str(tmp_path / out),
+            staging=str(tmp_path / "staging"), encoder=FAST_CODEC, runner="process", workers=2,
+            keep_staging=True,
+        )  # fmt: skip
+        report = run_config(config)
+        assert report.episodes == 2
+        return list(POOL_TASKS)
+
+    with prefect_api():
+        first = convert("first")
+        assert first and "write-file" not in first  # the episodes convert on the pool, the files are not
+        assert convert("again") == []  # every episode staged: nothing on the pool, no worker started
+        written = [name for name in asyncio.run(_latest_task_runs()) if name.startswith("write ")]
+    again = tmp_path / "again"
+    files = sorted(
+        p.relative_to(again).as_posix()
+        for d in ("data", "videos")
+        for p in (again / d).rglob("*")
+        if p.is_file()
+    )
+    assert len(written) == len(files) == 1 + 2  # one data file, one video file per camera: a task run each
+    for rel in files:
+        assert (tmp_path / "again" / rel).read_bytes() == (tmp_path / "first" / rel).read_bytes()

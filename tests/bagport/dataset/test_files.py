@@ -6,11 +6,16 @@ from __future__ import annotations
 from dataclasses import replace
 from pathlib import Path
 
+import pytest
+
+from bagport.dataset import write_dataset
 from bagport.dataset.data_files import plan_data_files
 from bagport.dataset.files import plan_files, staged_clip_sizes, staged_data_sizes, write_planned_file
 from bagport.dataset.meta import DatasetLimits
+from bagport.dataset.validate import validate_dataset
 from bagport.dataset.videos import plan_video_files
 from bagport.staging import EpisodeSummary
+from tests.s3 import s3_bucket
 
 MB = 1024 * 1024
 
@@ -65,6 +70,17 @@ def test_the_worker_measures_the_row_group_bytes_a_data_file_holds(
     assert abs(row_groups - planned) <= 16 * len(staged), (row_groups, planned)
 
 
+def test_an_episode_staged_before_data_bytes_is_sized_by_its_frame_table(
+    staged: list[EpisodeSummary],
+) -> None:
+    older = [
+        EpisodeSummary.from_dict({k: v for k, v in s.to_dict().items() if k != "data_bytes"}) for s in staged
+    ]
+    assert [s.data_bytes for s in older] == [None, None]
+    assert staged_data_sizes(older) == [Path(s.file("frames.parquet")).stat().st_size for s in staged]
+    assert staged_data_sizes(staged) == [s.data_bytes for s in staged]
+
+
 def test_the_plan_names_every_staged_input_once(staged: list[EpisodeSummary]) -> None:
     keys = [f.key for f in staged[0].features if f.video_info is not None]
     sizes = staged_clip_sizes(staged, keys)
@@ -110,3 +126,21 @@ def test_a_planned_file_reports_what_the_commit_needs(staged: list[EpisodeSummar
         round(s.frames / s.fps, 6) for s in staged
     ]
     assert replace(video, files=()).item == plan.files[1]
+
+
+@pytest.mark.slow
+def test_an_s3_build_uploads_every_data_file_its_task_wrote(
+    s3_env: dict[str, str], staged: list[EpisodeSummary], tmp_path: Path
+) -> None:
+    fs = s3_bucket(s3_env, "files")
+    report = write_dataset(
+        staged, "s3://files/ds", robot_type="r", limits=DatasetLimits(data_files_size_in_mb=1e-6)
+    )
+    fs.invalidate_cache()
+    assert sorted(p.rsplit("/", 2)[-1] for p in fs.find("files/ds/data")) == [
+        "file-000.parquet",
+        "file-001.parquet",
+    ]
+    fs.get("files/ds", str(tmp_path / "ds"), recursive=True)
+    result = validate_dataset(tmp_path / "ds", repo_id="test/s3-files")
+    assert (result.episodes, result.frames_decoded) == (2, report.frames)

@@ -96,6 +96,10 @@ class EpisodeSummary:
     """Per camera: what its clip depends on (``bagport.episode.reuse``); equal keys, equal clips."""
     reused_clips: dict[str, str] = field(default_factory=dict)
     """Per camera whose clip was copied from an earlier staged episode of the bag: that episode's id."""
+    data_bytes: int | None = None
+    """The episode's row group in a data file, in bytes, as the worker encoded it (indices from 0: the
+    final ones change it by a few bytes); the reduce plans the data files from it. ``None`` in a summary
+    staged before bagport recorded it (the reduce then uses the staged frame table's size)."""
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)

@@ -81,7 +81,7 @@ def test_conversion_is_visible_through_the_prefect_api(
     ]
     # the reduce's output files, one task run each (data, then each camera's video file)
     writes = [n for n in task_names if n.startswith("write ")]
-    assert any(n.startswith("write data from chunk-000/file-000") for n in writes), task_names
+    assert any(n.startswith("write data/chunk-000/file-000.parquet") for n in writes), task_names
     assert any(n.startswith("write videos/") for n in writes), task_names
     assert set(artifacts) >= {"bagport-qa", "bagport-summary", "bagport-progress"}
     qa_table = str(artifacts["bagport-qa"])

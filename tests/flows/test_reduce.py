@@ -1,8 +1,9 @@
-"""The reduce as a map on a real Dask cluster of two worker processes: every output file is written by its
-own task on a worker (the task stream shows them), into the local build folder beside the output; the
-commit publishes, ``bagport validate`` passes and LeRobot loads every frame. An append on the cluster
-adds files without reading the old ones. On the local process pool, the file tasks run on threads of the
-flow's process: a run with every episode staged starts no pool worker."""
+"""The reduce as a map on a real Dask cluster of two worker processes: every output file, each data file
+and each video file, is written by its own task on a worker (the task stream shows them), into the local
+build folder beside the output; the commit publishes, ``bagport validate`` passes and LeRobot loads every
+frame with the values the synthetic bags hold. An append on the cluster adds files without reading the
+old ones. On the local process pool, the file tasks run on threads of the flow's process: a run with every
+episode staged starts no pool worker."""
 
 from __future__ import annotations
 
@@ -13,6 +14,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pyarrow.parquet as pq
 import pytest
 from distributed import Client, LocalCluster, get_task_stream
 from prefect.client.orchestration import get_client
@@ -21,7 +24,8 @@ from prefect.client.schemas.sorting import FlowRunSort
 from prefect.task_runners import ProcessPoolTaskRunner
 
 from bagport.config import ConvertConfig
-from bagport.synth import EpisodeSpec, write_episode_bag
+from bagport.dataset.validate import video_backend
+from bagport.synth import EpisodeSpec, GroundTruth, write_episode_bag
 from flows.convert import run_config
 from flows.runners import prefect_api
 from tests.fsprobe import watch_opens
@@ -35,20 +39,45 @@ def _convert(tmp_path: Path, names: list[str], *extra: str) -> subprocess.Comple
         [
             sys.executable, "-m", "flows.cli", "convert", "--manifest", str(manifest),
             "--contract", str(SAMPLE_CONTRACT), "--output", str(tmp_path / "ds"),
-            "--staging", str(tmp_path / "staging"), "--video-files-size-in-mb", "0.001", *extra,
+            "--staging", str(tmp_path / "staging"), "--video-files-size-in-mb", "0.001",
+            "--data-files-size-in-mb", "0.001", *extra,
         ],
         capture_output=True, text=True, check=False, cwd=REPO, env={**os.environ, "BAGPORT_DEBUG": "0"},
     )  # fmt: skip
 
 
+def _check_values(root: Path, episodes: int) -> None:
+    """Every frame LeRobot loads holds its bag's true joint positions at the stamp the provenance says
+    was held, at the global index the episodes' metadata gives it."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+
+    rows = pq.read_table(sorted((root / "meta/provenance").rglob("*.parquet"))).to_pylist()
+    state = {
+        (r["episode_index"], r["frame_index"]): (r["index"], r["source_header_ns"])
+        for r in rows
+        if r["key"] == "observation.state"
+    }
+    dataset = LeRobotDataset("test/map", root=root, video_backend=video_backend())
+    truths = [GroundTruth(EpisodeSpec(duration_s=0.5, seed=n)) for n in range(episodes)]
+    for index in range(len(dataset)):
+        item = dataset[index]
+        episode, frame = int(item["episode_index"]), int(item["frame_index"])
+        provenance_index, held_ns = state[episode, frame]
+        assert int(item["index"]) == index == provenance_index
+        np.testing.assert_allclose(
+            item["observation.state"].numpy(), truths[episode].joint_position(held_ns), atol=1e-6
+        )
+    assert len(dataset) == len(state) == 15 * episodes
+
+
 @pytest.mark.slow
 def test_output_files_are_written_by_tasks_on_two_dask_workers(tmp_path: Path) -> None:
-    for n in range(3):
+    for n in range(4):
         write_episode_bag(tmp_path / f"ep{n}", "mcap", EpisodeSpec(duration_s=0.5, seed=n))
     first = _convert(tmp_path, ["ep0", "ep1"], "--runner", "thread")
     assert first.returncode == 0, first.stderr[-3000:]
     old = sorted(p for d in ("data", "videos") for p in (tmp_path / "ds" / d).rglob("*") if p.is_file())
-    assert len(old) == 5  # one data file, one video file per episode and camera (clips above 1 kB)
+    assert len(old) == 6  # per episode: a data file (above 1 kB each) and a video file per camera
     # one CLI run per cluster: its workers keep the first run's (temporary) Prefect API
     with (
         LocalCluster(  # type: ignore[no-untyped-call]
@@ -59,21 +88,26 @@ def test_output_files_are_written_by_tasks_on_two_dask_workers(tmp_path: Path) -
         workers = client.run(os.getpid)
         with get_task_stream(client) as stream, watch_opens(old) as opens:
             appended = _convert(
-                tmp_path, ["ep0", "ep1", "ep2"], "--append", "--runner", "dask", "--dask-address",
+                tmp_path, ["ep0", "ep1", "ep2", "ep3"], "--append", "--runner", "dask", "--dask-address",
                 cluster.scheduler_address,
             )  # fmt: skip
     assert appended.returncode == 0, appended.stderr[-3000:]
-    # the new data file and each camera's new video file: one task each, on the workers
+    # the two new data files and each camera's two new video files: one task each, on the workers
     wrote = [t for t in stream.data if str(t["key"]).startswith("write_file_task-")]
-    assert len(wrote) == 3
+    assert len(wrote) == 6
     assert {t["worker"] for t in wrote} <= set(workers) and os.getpid() not in workers.values()
+    data = sorted(
+        p.relative_to(tmp_path / "ds").as_posix() for p in (tmp_path / "ds/data").rglob("*.parquet")
+    )
+    assert data == [f"data/chunk-000/file-{n:03d}.parquet" for n in range(4)]
     assert opens.events == []  # the append opened none of the existing data or video files
     check = subprocess.run(
         [sys.executable, "-m", "flows.cli", "validate", str(tmp_path / "ds")],
         capture_output=True, text=True, check=False, cwd=REPO,
     )  # fmt: skip
     assert check.returncode == 0, check.stdout + check.stderr
-    assert "3 episode(s), 45 frames, 45 decoded through LeRobot" in check.stdout, check.stdout
+    assert "4 episode(s), 60 frames, 60 decoded through LeRobot" in check.stdout, check.stdout
+    _check_values(tmp_path / "ds", 4)
 
 
 POOL_TASKS: list[str] = []

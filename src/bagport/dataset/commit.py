@@ -81,20 +81,22 @@ def gather(session: WriteSession, written: Sequence[WrittenFile], episodes: int)
         )
     keys = [f.key for f in session.features if f.video_info is not None]
     videos: dict[str, list[VideoPlacement | None]] = {key: [None] * episodes for key in keys}
-    data: list[DataPlacement] = []
-    counts: list[tuple[tuple[int, int], ...]] = []
+    data: list[DataPlacement | None] = [None] * episodes
+    counts: list[tuple[tuple[int, int], ...]] = [()] * episodes
     for result in written:
-        if result.item.kind == "data":
-            data, counts = list(result.data), list(result.task_counts)
-        for position, placed in zip(result.item.episodes, result.videos, strict=False):
-            videos[result.item.key][position] = placed
+        for position, placed, pairs in zip(
+            result.item.episodes, result.data, result.task_counts, strict=False
+        ):
+            data[position], counts[position] = placed, pairs
+        for position, video in zip(result.item.episodes, result.videos, strict=False):
+            videos[result.item.key][position] = video
     task_indices = [
         np.repeat(np.array([i for i, _ in pairs], dtype=np.int64), [n for _, n in pairs]) for pairs in counts
     ]
     digests = {rel: digest for w in written for rel, _, digest in w.files}
     size = sum(size for w in written for _, size, _ in w.files)
     complete = {key: [p for p in placed if p is not None] for key, placed in videos.items()}
-    return Placed(data, task_indices, complete, digests, size)
+    return Placed([p for p in data if p is not None], task_indices, complete, digests, size)
 
 
 def _build_meta(

@@ -1,9 +1,13 @@
-"""Write ``data/chunk-*/file-*.parquet``: many episodes per file, one row group each."""
+"""Write ``data/chunk-*/file-*.parquet``: many episodes per file, one row group each.
+
+:func:`plan_data_files` decides which episodes go into which file before any is written, from each
+episode's row-group bytes (:func:`episode_data_bytes`, measured by the worker that staged it); then
+each file is written on its own (:func:`write_data_file`), in any process and any order."""
 
 from __future__ import annotations
 
 import json
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -14,12 +18,22 @@ import pyarrow.compute as pc
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
-from bagport.dataset.layout import DATA_PATH, next_chunk_file
+from bagport.dataset.layout import rotate_files
 from bagport.staging import StagedFeature
 
-__all__ = ["DataPlacement", "DataWritten", "hf_features_metadata", "task_counts", "write_data_files"]
+__all__ = [
+    "DataPlacement",
+    "DataWritten",
+    "episode_data_bytes",
+    "hf_features_metadata",
+    "plan_data_files",
+    "task_counts",
+    "write_data_file",
+]
 
 _MB = 1024 * 1024
+PARQUET_MAGIC_BYTES = 4
+"""``PAR1``: what a parquet file holds before its first row group."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -53,14 +67,17 @@ def _episode_table(
     frames_uri: str,
     episode_index: int,
     first_index: int,
-    task_index: dict[str, int],
+    task_index: Mapping[str, int] | None,
     vectors: Sequence[StagedFeature],
 ) -> pa.Table:
+    """The episode's rows as a data file holds them (``task_index``: ``None`` numbers the episode's own
+    tasks in the order they first appear)."""
     fs, path = url_to_fs(frames_uri)
     with fs.open(path, "rb") as handle:
         staged = pq.read_table(handle)
     frames = staged.num_rows
     tasks = [str(t) for t in staged.column("task").to_pylist()]
+    numbers = task_index if task_index is not None else {t: i for i, t in enumerate(dict.fromkeys(tasks))}
     columns: dict[str, Any] = {
         f.key: pc.list_flatten(staged.column(f.key)) if _is_scalar(f) else staged.column(f.key)
         for f in vectors
@@ -69,15 +86,56 @@ def _episode_table(
     columns["frame_index"] = staged.column("frame_index")
     columns["episode_index"] = pa.array(np.full(frames, episode_index, dtype=np.int64))
     columns["index"] = pa.array(np.arange(first_index, first_index + frames, dtype=np.int64))
-    columns["task_index"] = pa.array(np.array([task_index[t] for t in tasks], dtype=np.int64))
+    columns["task_index"] = pa.array(np.array([numbers[t] for t in tasks], dtype=np.int64))
     return pa.table(columns)
 
 
-def _would_exceed(path: Path, frames_in_file: int, frames: int, file_size_in_mb: float) -> bool:
-    """LeRobot's rotation rule (``dataset_writer.py``): size on disk + frames x average frame size >= limit."""
-    size_mb = path.stat().st_size / _MB  # row groups are on disk once written; the footer comes at close
-    per_frame_mb = size_mb / frames_in_file if frames_in_file else 0.0
-    return size_mb + per_frame_mb * frames >= file_size_in_mb
+class _Writer:
+    """A data file's parquet writer: the first episode's schema (with LeRobot's metadata), snappy, one
+    row group per episode as LeRobot's writer puts them."""
+
+    def __init__(self, where: str | pa.NativeFile, first: pa.Table, vectors: Sequence[StagedFeature]) -> None:
+        self.schema = first.schema.with_metadata({b"huggingface": hf_features_metadata(vectors)})
+        self.parquet = pq.ParquetWriter(where, self.schema, compression="snappy")
+
+    def add(self, table: pa.Table) -> None:
+        self.parquet.write_table(table.cast(self.schema), row_group_size=max(1, table.num_rows))
+
+
+def episode_data_bytes(frames_uri: str, vectors: Sequence[StagedFeature]) -> int:
+    """The bytes the episode's row group adds to a data file (what LeRobot's rotation rule counts),
+    encoded as :func:`write_data_file` encodes it but with episode and global indices from 0: the final
+    ``index`` values change the snappy-compressed size by a few bytes (the plan's estimate, docs/fleet.md)."""
+    table = _episode_table(frames_uri, 0, 0, None, vectors)
+    sink = pa.BufferOutputStream()
+    writer = _Writer(sink, table, vectors)
+    try:
+        writer.add(table)
+        return int(sink.tell()) - PARQUET_MAGIC_BYTES  # the row group; the footer comes at close
+    finally:
+        writer.parquet.close()
+
+
+def plan_data_files(
+    episode_bytes: Sequence[int],
+    episode_frames: Sequence[int],
+    *,
+    file_size_in_mb: float,
+    chunks_size: int,
+    start: tuple[int, int] = (0, 0),
+) -> list[tuple[tuple[int, int], list[int]]]:
+    """Group episodes into data files, ((chunk, file), positions) each, by LeRobot's rotation rule
+    (``dataset_writer.py``) on the planned sizes: a file rotates when its bytes on disk so far (the
+    ``PAR1`` magic and its row groups; the footer comes at close) + the episode's frames at the file's
+    average bytes per frame reaches ``file_size_in_mb``. A file holds at least one episode."""
+    limit = file_size_in_mb * _MB
+
+    def reaches(file_bytes: int, file_frames: int, n: int) -> bool:
+        on_disk = PARQUET_MAGIC_BYTES + file_bytes
+        per_frame = on_disk / file_frames if file_frames else 0.0
+        return on_disk + per_frame * episode_frames[n] >= limit
+
+    return rotate_files(episode_bytes, episode_frames, reaches, chunks_size=chunks_size, start=start)
 
 
 def task_counts(table: pa.Table) -> tuple[tuple[int, int], ...]:
@@ -92,57 +150,35 @@ class DataWritten:
     """One per episode."""
     task_counts: tuple[tuple[tuple[int, int], ...], ...]
     """One per episode: (task index, frames) pairs."""
-    files: tuple[str, ...]
-    """The files written, relative to the root."""
 
 
-def write_data_files(
-    root: Path,
+def write_data_file(
+    path: Path,
     frames_uris: Sequence[str],
     vectors: Sequence[StagedFeature],
-    task_index: dict[str, int],
+    task_index: Mapping[str, int],
     *,
-    file_size_in_mb: float,
-    chunks_size: int,
-    start: tuple[int, int] = (0, 0),
-    first_episode_index: int = 0,
-    first_index: int = 0,
+    chunk_file: tuple[int, int],
+    first_episode_index: int,
+    first_index: int,
 ) -> DataWritten:
-    """Stream staged frame tables (one ``frames.parquet`` per episode) into rotated data files.
-
-    A file rotates as LeRobot's writer rotates it: when its size on disk plus the episode's frames at
-    the file's average bytes per frame reaches ``file_size_in_mb``.  ``start`` (chunk, file) and the
-    first episode/global indices let an append continue a dataset.
-    """
+    """Stream staged frame tables (one ``frames.parquet`` per episode, in order) into the data file at
+    ``path``, one row group each; the episodes' indices and global ``index`` values start at the given
+    ones (where the plan put the file: :func:`plan_data_files`)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
     placements: list[DataPlacement] = []
     counts: list[tuple[tuple[int, int], ...]] = []
-    files: list[str] = []
-    chunk, file = start
-    writer: pq.ParquetWriter | None = None
-    schema: pa.Schema | None = None
-    path = root
-    frames_in_file = 0
-    metadata = {b"huggingface": hf_features_metadata(vectors)}
+    writer: _Writer | None = None
     try:
         for episode_index, frames_uri in enumerate(frames_uris, start=first_episode_index):
             table = _episode_table(frames_uri, episode_index, first_index, task_index, vectors)
-            if writer is not None and _would_exceed(path, frames_in_file, table.num_rows, file_size_in_mb):
-                writer.close()
-                writer = None
-                chunk, file = next_chunk_file(chunk, file, chunks_size)
-            if writer is None or schema is None:
-                files.append(DATA_PATH.format(chunk_index=chunk, file_index=file))
-                path = root / files[-1]
-                path.parent.mkdir(parents=True, exist_ok=True)
-                schema = table.schema.with_metadata(metadata)
-                writer = pq.ParquetWriter(path, schema, compression="snappy")
-                frames_in_file = 0
-            writer.write_table(table.cast(schema), row_group_size=max(1, table.num_rows))
-            frames_in_file += table.num_rows
-            placements.append(DataPlacement(chunk, file, first_index, first_index + table.num_rows))
+            if writer is None:
+                writer = _Writer(str(path), table, vectors)
+            writer.add(table)
+            placements.append(DataPlacement(*chunk_file, first_index, first_index + table.num_rows))
             counts.append(task_counts(table))
             first_index += table.num_rows
     finally:
         if writer is not None:
-            writer.close()
-    return DataWritten(tuple(placements), tuple(counts), tuple(files))
+            writer.parquet.close()
+    return DataWritten(tuple(placements), tuple(counts))

@@ -1,38 +1,47 @@
 """The reduce as a map: plan the output files, then write each one on its own (any process, any order).
 
-:func:`plan_files` decides, from the staged summaries and clip sizes alone, which episodes go to which
-video file per camera (LeRobot's size rule) and where the data files start; :func:`write_planned_file`
-writes one planned item from the staging store into the build location and returns a small
-:class:`WrittenFile` (paths, sizes, SHA-256, the per-episode placements ``meta/`` needs). The commit
+:func:`plan_files` decides, from the staged summaries and sizes alone, which episodes go to which data
+file and which video file per camera, by LeRobot's size rules; :func:`write_planned_file` writes one
+planned file from the staging store into the build location and returns a small :class:`WrittenFile`
+(paths, sizes, SHA-256, the per-episode placements ``meta/`` needs). The commit
 (:mod:`bagport.dataset.write`) then reads only these results and the staged summaries and stats.
 
-Data files are one item: LeRobot rotates them by their size on disk as they are written. That size is
-the sum of the episodes' encoded row groups (a row group's bytes do not depend on where in the file it
-goes), but an episode's row group bytes depend on its final ``index`` values (snappy over them: a few
-bytes either way), so an exact plan would have to encode every episode's table once more before the
-write, reading every staged frame table; a plan from staged sizes or a bytes-per-row bound would not be
-LeRobot's rule (docs/fleet.md). They hold no video (a small share of the bytes). Each video file is an item.
+A video file's episodes follow from the staged clips' sizes (one metadata request per clip: a remux keeps
+them). A data file's follow from each episode's row-group bytes, which the worker measured when it staged
+the episode (``EpisodeSummary.data_bytes``: the episode's table encoded as the data file encodes it, with
+indices from 0; its final ``index`` values change the size by a few bytes), under LeRobot's data rule
+(:func:`~bagport.dataset.data_files.plan_data_files`); the episode and global indices of each data file
+follow from the frame counts, so no data file waits for another (docs/fleet.md).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from itertools import accumulate
 from pathlib import Path
 from typing import Literal
 
 from fsspec.core import url_to_fs
 
-from bagport.dataset.data_files import DataPlacement, write_data_files
+from bagport.dataset.data_files import DataPlacement, plan_data_files, write_data_file
 from bagport.dataset.journal import file_sha256
-from bagport.dataset.layout import VIDEO_PATH
+from bagport.dataset.layout import DATA_PATH, VIDEO_PATH
 from bagport.dataset.meta import DatasetLimits
 from bagport.dataset.videos import VideoPlacement, plan_video_files, write_video_file
 from bagport.scratch import scratch_folder
 from bagport.staging import FRAMES_FILE, EpisodeSummary, StagedFeature
 from bagport.uris import is_local
 
-__all__ = ["FilePlan", "PlannedFile", "WrittenFile", "plan_files", "staged_clip_sizes", "write_planned_file"]
+__all__ = [
+    "FilePlan",
+    "PlannedFile",
+    "WrittenFile",
+    "plan_files",
+    "staged_clip_sizes",
+    "staged_data_sizes",
+    "write_planned_file",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -41,17 +50,19 @@ class PlannedFile:
     key: str
     """The camera key of a video file ("" for the data files)."""
     chunk_file: tuple[int, int]
-    """Where the file goes (data: the first data file, the next ones follow by size)."""
+    """Where the file goes."""
     episodes: tuple[int, ...]
     """Positions of the episodes in the run's kept episodes, in order."""
     inputs: tuple[str, ...]
     """The staged file each episode contributes (``frames.parquet`` or the camera's clip), by URI."""
+    first_index: int = 0
+    """A data file: the global ``index`` of its first frame."""
 
     @property
     def name(self) -> str:
-        """A short label for logs and task runs."""
+        """The file's path in the dataset (its label in logs and task runs too)."""
         if self.kind == "data":
-            return f"data from chunk-{self.chunk_file[0]:03d}/file-{self.chunk_file[1]:03d}"
+            return DATA_PATH.format(chunk_index=self.chunk_file[0], file_index=self.chunk_file[1])
         return VIDEO_PATH.format(
             video_key=self.key, chunk_index=self.chunk_file[0], file_index=self.chunk_file[1]
         )
@@ -73,10 +84,10 @@ class FilePlan:
 class WrittenFile:
     item: PlannedFile
     files: tuple[tuple[str, int, str], ...]
-    """(path relative to the dataset root, size in bytes, SHA-256) of each file written."""
+    """(path relative to the dataset root, size in bytes, SHA-256) of the file written."""
     data: tuple[DataPlacement, ...] = ()
     task_counts: tuple[tuple[tuple[int, int], ...], ...] = ()
-    """Per episode of a data item: (task index, frames) pairs."""
+    """Per episode of a data file: (task index, frames) pairs."""
     videos: tuple[VideoPlacement, ...] = ()
 
 
@@ -90,22 +101,54 @@ def staged_clip_sizes(summaries: Sequence[EpisodeSummary], keys: Sequence[str]) 
     return sizes
 
 
+def staged_data_sizes(summaries: Sequence[EpisodeSummary]) -> list[int]:
+    """Each episode's row-group bytes in a data file, as its worker measured them; for an episode staged
+    before bagport recorded them, its staged ``frames.parquet`` size (one metadata request: a rougher
+    estimate, without the ``index`` column)."""
+    sizes: list[int] = []
+    for summary in summaries:
+        if summary.data_bytes is not None:
+            sizes.append(summary.data_bytes)
+            continue
+        fs, path = url_to_fs(summary.file(FRAMES_FILE))
+        sizes.append(int(fs.size(path)))
+    return sizes
+
+
 def plan_files(
     summaries: Sequence[EpisodeSummary],
     features: Sequence[StagedFeature],
     tasks: Sequence[str],
     limits: DatasetLimits,
     clip_sizes: Mapping[str, Sequence[int]],
+    data_sizes: Sequence[int],
     *,
     next_data: tuple[int, int] = (0, 0),
     next_video: Mapping[str, tuple[int, int]] | None = None,
     first_episode: int = 0,
     first_index: int = 0,
 ) -> FilePlan:
-    """Which episodes go to which output file (pure: no I/O). ``next_*`` and ``first_*`` continue a
-    dataset (an append's base)."""
-    everyone = tuple(range(len(summaries)))
-    planned = [PlannedFile("data", "", next_data, everyone, tuple(s.file(FRAMES_FILE) for s in summaries))]
+    """Which episodes go to which output file (pure: no I/O). ``data_sizes``: each episode's row-group
+    bytes (:func:`staged_data_sizes`); ``next_*`` and ``first_*`` continue a dataset (an append's base)."""
+    frames = [s.frames for s in summaries]
+    starts = list(accumulate(frames, initial=first_index))  # each episode's first global index
+    planned = [
+        PlannedFile(
+            "data",
+            "",
+            chunk_file,
+            tuple(ns),
+            tuple(summaries[n].file(FRAMES_FILE) for n in ns),
+            starts[ns[0]],
+        )
+        for chunk_file, ns in plan_data_files(
+            data_sizes,
+            frames,
+            file_size_in_mb=limits.data_files_size_in_mb,
+            chunks_size=limits.chunks_size,
+            start=next_data,
+        )
+    ]
     for key in (f.key for f in features if f.video_info is not None):
         groups = plan_video_files(
             clip_sizes[key],
@@ -128,21 +171,20 @@ def plan_files(
 
 
 def _write_local(plan: FilePlan, item: PlannedFile, root: Path) -> WrittenFile:
+    rel = item.name
     if item.kind == "data":
-        written = write_data_files(
-            root,
+        written = write_data_file(
+            root / rel,
             item.inputs,
             plan.vectors,
             {t: i for i, t in enumerate(plan.tasks)},
-            file_size_in_mb=plan.limits.data_files_size_in_mb,
-            chunks_size=plan.limits.chunks_size,
-            start=item.chunk_file,
-            first_episode_index=plan.first_episode,
-            first_index=plan.first_index,
+            chunk_file=item.chunk_file,
+            first_episode_index=plan.first_episode + item.episodes[0],
+            first_index=item.first_index,
         )
-        files = _described(root, written.files)
-        return WrittenFile(item, files, data=written.placements, task_counts=written.task_counts)
-    rel = VIDEO_PATH.format(video_key=item.key, chunk_index=item.chunk_file[0], file_index=item.chunk_file[1])
+        return WrittenFile(
+            item, _described(root, [rel]), data=written.placements, task_counts=written.task_counts
+        )
     videos = write_video_file(root / rel, item.inputs, fps=plan.fps, chunk_file=item.chunk_file)
     return WrittenFile(item, _described(root, [rel]), videos=tuple(videos))
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
+
 __all__ = [
     "APPEND_RUN_RECORD_PATH",
     "CODEBASE_VERSION",
@@ -19,6 +21,7 @@ __all__ = [
     "TASKS_PATH",
     "VIDEO_PATH",
     "next_chunk_file",
+    "rotate_files",
 ]
 
 CODEBASE_VERSION = "v3.0"
@@ -56,3 +59,32 @@ def next_chunk_file(chunk_index: int, file_index: int, chunks_size: int) -> tupl
     if file_index + 1 >= chunks_size:
         return chunk_index + 1, 0
     return chunk_index, file_index + 1
+
+
+def rotate_files(
+    sizes_bytes: Sequence[int],
+    frames: Sequence[int],
+    reaches: Callable[[int, int, int], bool],
+    *,
+    chunks_size: int,
+    start: tuple[int, int] = (0, 0),
+) -> list[tuple[tuple[int, int], list[int]]]:
+    """Group episodes (by their sizes and frame counts, in order) into files: ((chunk, file), positions)
+    each, at least one episode a file (an episode never splits). A file rotates when ``reaches(its bytes
+    so far, its frames so far, the next position)``, the caller's size rule; ``start``: where the first
+    file goes (after the last one, for an append)."""
+    groups: list[tuple[tuple[int, int], list[int]]] = []
+    where = start
+    group: list[int] = []
+    group_bytes = group_frames = 0
+    for n, (size, count) in enumerate(zip(sizes_bytes, frames, strict=True)):
+        if group and reaches(group_bytes, group_frames, n):
+            groups.append((where, group))
+            where = next_chunk_file(*where, chunks_size)
+            group, group_bytes, group_frames = [], 0, 0
+        group.append(n)
+        group_bytes += size
+        group_frames += count
+    if group:
+        groups.append((where, group))
+    return groups

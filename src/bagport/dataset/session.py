@@ -21,7 +21,7 @@ from fsspec.core import url_to_fs
 
 from bagport.dataset.base import DatasetBase, read_base
 from bagport.dataset.crashpoints import reached
-from bagport.dataset.files import FilePlan, plan_files, staged_clip_sizes
+from bagport.dataset.files import FilePlan, plan_files, staged_clip_sizes, staged_data_sizes
 from bagport.dataset.journal import Journal, write_journal
 from bagport.dataset.layout import STAGED_DIR
 from bagport.dataset.meta import DatasetLimits
@@ -97,14 +97,16 @@ def _plan(
     known = base.tasks if base is not None else []
     tasks = list(dict.fromkeys([*known, *(t for s in summaries for t in s.tasks)]))
     sizes = staged_clip_sizes(summaries, [f.key for f in features if f.video_info is not None])
+    data_sizes = staged_data_sizes(summaries)
     if base is None:
-        return plan_files(summaries, features, tasks, limits, sizes)
+        return plan_files(summaries, features, tasks, limits, sizes, data_sizes)
     return plan_files(
         summaries,
         features,
         tasks,
         DatasetLimits.from_info(base.info),
         sizes,
+        data_sizes,
         next_data=base.next_data,
         next_video=base.next_video,
         first_episode=base.episodes,

@@ -8,7 +8,7 @@ from pathlib import Path
 
 from fsspec.core import url_to_fs
 
-from bagport.dataset.layout import next_chunk_file
+from bagport.dataset.layout import rotate_files
 from bagport.scratch import scratch_folder
 from bagport.uris import is_local
 from bagport.video import concat_clips
@@ -34,20 +34,13 @@ def plan_video_files(
     reaches ``file_size_in_mb``; ``start``: where the first new file goes (after the last one, for an
     append)."""
     limit = file_size_in_mb * _MB
-    groups: list[tuple[tuple[int, int], list[int]]] = []
-    where = start
-    group: list[int] = []
-    group_bytes = 0
-    for n, size in enumerate(clip_sizes):
-        if group and group_bytes + size >= limit:  # LeRobot's test, on clip sizes
-            groups.append((where, group))
-            where = next_chunk_file(*where, chunks_size)
-            group, group_bytes = [], 0
-        group.append(n)
-        group_bytes += size
-    if group:
-        groups.append((where, group))
-    return groups
+    return rotate_files(
+        clip_sizes,
+        [0] * len(clip_sizes),
+        lambda file_bytes, _, n: file_bytes + clip_sizes[n] >= limit,  # LeRobot's test, on clip sizes
+        chunks_size=chunks_size,
+        start=start,
+    )
 
 
 def write_video_file(

@@ -20,6 +20,7 @@ from fsspec.core import url_to_fs
 from bagport import __version__
 from bagport.bags import open_bag, source_stamp
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
+from bagport.dataset.data_files import episode_data_bytes
 from bagport.episode.alignment import Alignment
 from bagport.episode.assemble import iter_frames
 from bagport.episode.checks import bag_fingerprint
@@ -36,6 +37,7 @@ from bagport.request import EpisodeRequest
 from bagport.scratch import clean_dead_scratch, scratch_dir
 from bagport.staging import (
     EPISODE_SUMMARY,
+    FRAMES_FILE,
     PROVENANCE_FILE,
     QA_FILE,
     STATS_FILE,
@@ -191,6 +193,9 @@ def _summary(episode: _Episode, features: tuple[StagedFeature, ...], qa: Episode
         bag_read={**episode.prepared.reader.transfer.to_dict(), "warnings": list(info.warnings)},
         clip_keys=episode.clip_keys,
         reused_clips={key: clip.episode_id for key, clip in episode.reused.items()},
+        data_bytes=episode_data_bytes(
+            str(episode.workdir / FRAMES_FILE), [f for f in features if f.video_info is None]
+        ),
     )
 
 

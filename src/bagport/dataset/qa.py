@@ -10,14 +10,16 @@ meta/qa/report.html                  the fleet report over the whole dataset (ba
 ```
 Excluded bags and bags that could not be converted are listed too, with the reason. Each run adds its
 own table, index and detail files; ``summary.json`` and ``report.html`` are rebuilt from the index files
-alone, so an append never reads the old episodes' checks or plots.
+alone, so an append never reads the old episodes' checks or plots. A run's entries may hold only a
+digest of each staged episode's QA (:meth:`bagport.qa.QAEntry.of_staged`): the table and the detail pages
+read each record back once, one episode at a time, so the commit's memory does not grow with the fleet.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import fields, replace
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
@@ -53,6 +55,10 @@ _BRIEF_KEYS = tuple(f.name for f in fields(QABrief) if f.name in INDEX_SCHEMA.na
 the brief's order: one ``summary.json`` episode."""
 
 
+QA_TABLE_GROUP_ROWS = 16_384
+"""Rows of this run's QA table written at a time (a row group): the checks of a whole fleet are never
+held at once."""
+
 _QA_FIELDS: list[tuple[str, pa.DataType]] = [
     ("bag_uri", pa.string()),
     ("episode_index", pa.int64()),
@@ -87,26 +93,57 @@ def add_fleet_checks(
             continue
         stats = episode_stats[entry.episode_index]
         extra = step_outlier_checks(stats.largest_steps, sketches.steps, names, values, fps)
-        out.append(replace(entry, qa=entry.qa.with_checks(extra)))
+        out.append(entry.with_checks(extra))
     return out
 
 
 def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
+    """The QA table's rows of ``entries`` (whole ones: :meth:`QAEntry.whole`), one per episode and check."""
     rows: dict[str, list[Any]] = {name: [] for name in QA_SCHEMA.names}
     for entry in entries:
-        for check in entry.qa.checks:
-            rows["bag_uri"].append(entry.qa.bag_uri)
-            rows["episode_index"].append(entry.episode_index)
-            rows["excluded"].append(entry.episode_index is None)
-            rows["check"].append(check.check)
-            rows["subject"].append(check.subject)
-            rows["value"].append(check.value)
-            rows["verdict"].append(check.verdict)
-            rows["hard"].append(check.hard)
-            rows["reason"].append(check.reason)
-            robot = entry.metadata.get("robot_id")
-            rows["robot_id"].append(None if robot is None else str(robot))
+        _add_rows(rows, entry)
     return pa.table(rows, schema=QA_SCHEMA)
+
+
+def _add_rows(rows: dict[str, list[Any]], entry: QAEntry) -> None:
+    robot = entry.metadata.get("robot_id")
+    for check in entry.qa.checks:
+        rows["bag_uri"].append(entry.qa.bag_uri)
+        rows["episode_index"].append(entry.episode_index)
+        rows["excluded"].append(entry.episode_index is None)
+        rows["check"].append(check.check)
+        rows["subject"].append(check.subject)
+        rows["value"].append(check.value)
+        rows["verdict"].append(check.verdict)
+        rows["hard"].append(check.hard)
+        rows["reason"].append(check.reason)
+        rows["robot_id"].append(None if robot is None else str(robot))
+
+
+def _write_run_pages(
+    root: Path, entries: Sequence[QAEntry], run_number: int, names: Names | None, fps: int | None
+) -> None:
+    """This run's QA table and detail pages, in one pass: each entry's whole record (a digest entry's read
+    back from the staging store, once) gives its checks' rows and, when it warned or failed, its page;
+    then it is dropped. At most :data:`QA_TABLE_GROUP_ROWS` rows are held, so memory does not grow with
+    the fleet."""
+    table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
+    table_path.parent.mkdir(parents=True, exist_ok=True)
+    rows: dict[str, list[Any]] = {name: [] for name in QA_SCHEMA.names}
+    groups = 0
+    with pq.ParquetWriter(table_path, QA_SCHEMA, compression="zstd") as writer:
+        for position, entry in enumerate(entries):
+            whole = entry.whole()
+            _add_rows(rows, whole)
+            if whole.qa.verdict != "pass":
+                page = root / "meta/qa" / detail_path(run_number, position)
+                page.parent.mkdir(parents=True, exist_ok=True)
+                page.write_text(render_episode_page(whole, names, fps, "../../report.html"), encoding="utf-8")
+            if len(rows["check"]) >= QA_TABLE_GROUP_ROWS:
+                writer.write_table(pa.table(rows, schema=QA_SCHEMA))
+                rows, groups = {name: [] for name in QA_SCHEMA.names}, groups + 1
+        if rows["check"] or not groups:
+            writer.write_table(pa.table(rows, schema=QA_SCHEMA))
 
 
 def _migrate_legacy_summary(root: Path, run_number: int, previous: str) -> None:
@@ -163,21 +200,13 @@ def write_qa(
     and the fleet report over every run from the index files (the earlier runs' at ``previous``, the
     dataset's root as a path or URI, when this run builds its ``meta/`` apart from it; default ``root``).
     Returns the report's path in the dataset."""
-    table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
-    table_path.parent.mkdir(parents=True, exist_ok=True)
-    pq.write_table(qa_rows(entries), table_path, compression="zstd")
+    fps = dataset.get("fps")
+    _write_run_pages(root, entries, run_number, names, int(fps) if fps else None)
     _migrate_legacy_summary(root, run_number, previous or str(root))
     index = index_table(entries, run_number, robot_type)
     index_path = root / QA_INDEX_PATH.format(run=run_number)
     index_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(index, index_path, compression="zstd")
-    fps = dataset.get("fps")
-    for position, entry in enumerate(entries):
-        if entry.qa.verdict != "pass":
-            page = root / "meta/qa" / detail_path(run_number, position)
-            page.parent.mkdir(parents=True, exist_ok=True)
-            html = render_episode_page(entry, names, int(fps) if fps else None, "../../report.html")
-            page.write_text(html, encoding="utf-8")
     whole = pa.concat_tables(_index_tables(root, previous))
     episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in whole.select(list(_BRIEF_KEYS)).to_pylist()]
     summary = {

@@ -34,7 +34,6 @@ import time
 import tracemalloc
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -47,9 +46,11 @@ from bagport.dataset.commit import commit_write  # noqa: E402
 from bagport.dataset.files import write_planned_file  # noqa: E402
 from bagport.dataset.session import open_write  # noqa: E402
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for  # noqa: E402
+from bagport.episode.staged import PlannedEpisode  # noqa: E402
 from bagport.qa import QAConfig  # noqa: E402
+from bagport.reduce import read_staged  # noqa: E402
 from bagport.selection import select_episodes  # noqa: E402
-from bagport.staging import EpisodeSummary, read_summary  # noqa: E402
+from bagport.staging import EpisodeSummary  # noqa: E402
 from bagport.video.settings import EncoderSettings  # noqa: E402
 from bench.report import write_section  # noqa: E402
 from bench.workloads import WORKLOADS, ensure_workload  # noqa: E402
@@ -176,15 +177,13 @@ def measure_commit(staged: list[EpisodeSummary], out: Path, sizes: Sequence[int]
 def _reduce_child(job: Path) -> None:
     """In a fresh process, as the flow process does it: every staged summary read, the selection, the files
     written by another process, the commit; then the peak RSS (and tracemalloc's, when asked)."""
-    dirs, root, trace = pickle.loads(job.read_bytes())
+    episodes, root, trace = pickle.loads(job.read_bytes())
     before = _status_kb("VmRSS")
     if trace:
         tracemalloc.start()
-    summaries = []
-    for entry, uri in enumerate(dirs):
-        summary = read_summary(uri)
-        assert summary is not None, uri
-        summaries.append(replace(summary, manifest_entry=entry))
+    summaries, _ = read_staged(
+        [PlannedEpisode(uri, bag, entry) for entry, (uri, bag) in enumerate(episodes)]
+    )  # as bagport.reduce.start_reduce reads them
     kept, entries = select_episodes(
         summaries, [], policy="keep", keep_labelled=False, output=root, appending=False
     )
@@ -221,7 +220,9 @@ def measure_reduce(
         root = out / f"reduce-{count}"
         shutil.rmtree(root, ignore_errors=True)
         job = out / f"reduce-{count}.pickle"
-        job.write_bytes(pickle.dumps(([s.dir_uri for s in _repeat(staged, count)], str(root), trace)))
+        job.write_bytes(
+            pickle.dumps(([(s.dir_uri, s.bag_uri) for s in _repeat(staged, count)], str(root), trace))
+        )
         load = _load()
         started = time.perf_counter()
         child = subprocess.run(

@@ -27,6 +27,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
+from bagport.dataset.arrow_memory import release_arrow_memory
 from bagport.dataset.meta import EpisodeStats
 from bagport.dataset.sketches import DatasetSketches
 from bagport.qa import QABrief, QAConfig, QAEntry
@@ -55,7 +56,7 @@ _BRIEF_KEYS = tuple(f.name for f in fields(QABrief) if f.name in INDEX_SCHEMA.na
 the brief's order: one ``summary.json`` episode."""
 
 
-QA_TABLE_GROUP_ROWS = 16_384
+QA_TABLE_GROUP_ROWS = 4_096
 """Rows of this run's QA table written at a time (a row group): the checks of a whole fleet are never
 held at once."""
 
@@ -101,49 +102,45 @@ def qa_rows(entries: Sequence[QAEntry]) -> pa.Table:
     """The QA table's rows of ``entries`` (whole ones: :meth:`QAEntry.whole`), one per episode and check."""
     rows: dict[str, list[Any]] = {name: [] for name in QA_SCHEMA.names}
     for entry in entries:
-        _add_rows(rows, entry)
+        robot = entry.metadata.get("robot_id")
+        for check in entry.qa.checks:
+            rows["bag_uri"].append(entry.qa.bag_uri)
+            rows["episode_index"].append(entry.episode_index)
+            rows["excluded"].append(entry.episode_index is None)
+            rows["check"].append(check.check)
+            rows["subject"].append(check.subject)
+            rows["value"].append(check.value)
+            rows["verdict"].append(check.verdict)
+            rows["hard"].append(check.hard)
+            rows["reason"].append(check.reason)
+            rows["robot_id"].append(None if robot is None else str(robot))
     return pa.table(rows, schema=QA_SCHEMA)
-
-
-def _add_rows(rows: dict[str, list[Any]], entry: QAEntry) -> None:
-    robot = entry.metadata.get("robot_id")
-    for check in entry.qa.checks:
-        rows["bag_uri"].append(entry.qa.bag_uri)
-        rows["episode_index"].append(entry.episode_index)
-        rows["excluded"].append(entry.episode_index is None)
-        rows["check"].append(check.check)
-        rows["subject"].append(check.subject)
-        rows["value"].append(check.value)
-        rows["verdict"].append(check.verdict)
-        rows["hard"].append(check.hard)
-        rows["reason"].append(check.reason)
-        rows["robot_id"].append(None if robot is None else str(robot))
 
 
 def _write_run_pages(
     root: Path, entries: Sequence[QAEntry], run_number: int, names: Names | None, fps: int | None
 ) -> None:
     """This run's QA table and detail pages, in one pass: each entry's whole record (a digest entry's read
-    back from the staging store, once) gives its checks' rows and, when it warned or failed, its page;
-    then it is dropped. At most :data:`QA_TABLE_GROUP_ROWS` rows are held, so memory does not grow with
-    the fleet."""
+    back from the staging store, once) gives its checks' rows (Arrow at once: no Python object of the
+    record outlives it, so the records' memory is reused) and, when it warned or failed, its page; at
+    most :data:`QA_TABLE_GROUP_ROWS` rows are held, so memory does not grow with the fleet."""
     table_path = root / QA_TABLE_PATH.replace("file-000", f"file-{run_number:03d}")
     table_path.parent.mkdir(parents=True, exist_ok=True)
-    rows: dict[str, list[Any]] = {name: [] for name in QA_SCHEMA.names}
-    groups = 0
+    group: list[pa.Table] = []
+    written = 0
     with pq.ParquetWriter(table_path, QA_SCHEMA, compression="zstd") as writer:
         for position, entry in enumerate(entries):
             whole = entry.whole()
-            _add_rows(rows, whole)
+            group.append(qa_rows([whole]))
             if whole.qa.verdict != "pass":
                 page = root / "meta/qa" / detail_path(run_number, position)
                 page.parent.mkdir(parents=True, exist_ok=True)
                 page.write_text(render_episode_page(whole, names, fps, "../../report.html"), encoding="utf-8")
-            if len(rows["check"]) >= QA_TABLE_GROUP_ROWS:
-                writer.write_table(pa.table(rows, schema=QA_SCHEMA))
-                rows, groups = {name: [] for name in QA_SCHEMA.names}, groups + 1
-        if rows["check"] or not groups:
-            writer.write_table(pa.table(rows, schema=QA_SCHEMA))
+            if sum(len(t) for t in group) >= QA_TABLE_GROUP_ROWS:
+                writer.write_table(pa.concat_tables(group).combine_chunks())
+                group, written = [], written + 1
+        if group or not written:
+            writer.write_table(pa.concat_tables(group).combine_chunks() if group else qa_rows([]))
 
 
 def _migrate_legacy_summary(root: Path, run_number: int, previous: str) -> None:
@@ -166,8 +163,10 @@ def _migrate_legacy_summary(root: Path, run_number: int, previous: str) -> None:
     pq.write_table(pa.Table.from_pylist(rows, schema=INDEX_SCHEMA), legacy_path, compression="zstd")
 
 
-def _index_tables(root: Path, previous: str | None) -> list[pa.Table]:
-    """Every run's QA index, in run order: this run's (under ``root``) and the earlier ones (``previous``)."""
+def _index_tables(root: Path, previous: str | None, run_number: int, index: pa.Table) -> list[pa.Table]:
+    """Every run's QA index, in run order: this run's (``index``, as written under ``root``), the others
+    under ``root`` (a legacy ``run-000``) and the earlier ones (``previous``)."""
+    this_run = QA_INDEX_PATH.format(run=run_number).rsplit("/", 1)[-1]
     mine = {p.name: p for p in (root / "meta/qa/index").glob("run-*.parquet")}
     fs, before = url_to_fs(previous or str(root))
     theirs = {
@@ -177,11 +176,13 @@ def _index_tables(root: Path, previous: str | None) -> list[pa.Table]:
     }
     tables = []
     for name in sorted([*mine, *theirs]):
-        if name in mine:
+        if name == this_run:
+            tables.append(index)
+        elif name in mine:
             tables.append(pq.read_table(mine[name], schema=INDEX_SCHEMA))
-            continue
-        with fs.open(theirs[name], "rb") as handle:
-            tables.append(pq.read_table(handle, schema=INDEX_SCHEMA))
+        else:
+            with fs.open(theirs[name], "rb") as handle:
+                tables.append(pq.read_table(handle, schema=INDEX_SCHEMA))
     return tables
 
 
@@ -202,12 +203,13 @@ def write_qa(
     Returns the report's path in the dataset."""
     fps = dataset.get("fps")
     _write_run_pages(root, entries, run_number, names, int(fps) if fps else None)
+    release_arrow_memory()
     _migrate_legacy_summary(root, run_number, previous or str(root))
     index = index_table(entries, run_number, robot_type)
     index_path = root / QA_INDEX_PATH.format(run=run_number)
     index_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(index, index_path, compression="zstd")
-    whole = pa.concat_tables(_index_tables(root, previous))
+    whole = pa.concat_tables(_index_tables(root, previous, run_number, index))
     episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in whole.select(list(_BRIEF_KEYS)).to_pylist()]
     summary = {
         "episodes": episodes,

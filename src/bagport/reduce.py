@@ -79,9 +79,15 @@ class ReduceStart:
     limits: DatasetLimits
 
 
+_LEAN = ("alignment", "qa")
+"""Fields of a staged summary the reduce does not hold: the run record reads them back from the staged
+``episode.json`` as it writes each episode's entry (:func:`bagport.dataset.provenance.episode_provenance`)."""
+
+
 class _Shared:
     """What many staged summaries have in common, held once: the features (a fleet's are usually one
-    tuple) and the keys of their dicts (JSON decoding makes new key strings for every file)."""
+    tuple) and the keys of their dicts (JSON decoding makes new key strings for every file). The
+    alignment and QA digest, which only the run record needs, are left out (:data:`_LEAN`)."""
 
     _MAX_FEATURES = 16
 
@@ -96,9 +102,9 @@ class _Shared:
         changes = {
             f.name: self._value(value)
             for f in fields(EpisodeSummary)
-            if isinstance(value := getattr(summary, f.name), dict | list)
+            if isinstance(value := getattr(summary, f.name), dict | list) and f.name not in _LEAN
         }
-        return replace(summary, features=features or summary.features, **changes)
+        return replace(summary, features=features or summary.features, alignment=[], qa={}, **changes)
 
     def _value(self, value: Any) -> Any:
         if isinstance(value, dict):
@@ -110,8 +116,9 @@ class _Shared:
 
 def read_staged(staged: Sequence[PlannedEpisode]) -> tuple[list[EpisodeSummary], list[PlannedEpisode]]:
     """The staged summaries with what the current plan decides on each (:meth:`PlannedEpisode.apply`), and
-    the planned episodes with their source stamp. The summaries share their common parts (:class:`_Shared`):
-    the reduce holds every kept one from the selection to the commit, so each must stay small."""
+    the planned episodes with their source stamp. The reduce holds every kept summary from the selection to
+    the commit, so each is held small: common parts shared, the run record's alignment and QA digest left
+    to be read back (:class:`_Shared`)."""
     shared = _Shared()
     summaries: list[EpisodeSummary] = []
     stamped: list[PlannedEpisode] = []

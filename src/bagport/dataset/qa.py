@@ -209,6 +209,7 @@ def write_qa(
     index_path = root / QA_INDEX_PATH.format(run=run_number)
     index_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(index, index_path, compression="zstd")
+    release_arrow_memory()
     whole = pa.concat_tables(_index_tables(root, previous, run_number, index))
     episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in whole.select(list(_BRIEF_KEYS)).to_pylist()]
     summary = {

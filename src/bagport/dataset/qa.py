@@ -211,7 +211,14 @@ def write_qa(
     pq.write_table(index, index_path, compression="zstd")
     release_arrow_memory()
     whole = pa.concat_tables(_index_tables(root, previous, run_number, index))
-    episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in whole.select(list(_BRIEF_KEYS)).to_pylist()]
+    _write_summary(root, whole, config)
+    (root / QA_REPORT_PATH).write_text(render_fleet_page(whole, dataset, run_number), encoding="utf-8")
+    return QA_REPORT_PATH
+
+
+def _write_summary(root: Path, index: pa.Table, config: dict[str, Any]) -> None:
+    """``summary.json`` from every run's index (its rows gone before the fleet page builds its own)."""
+    episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in index.select(list(_BRIEF_KEYS)).to_pylist()]
     summary = {
         "episodes": episodes,
         "kept": sum(e["episode_index"] is not None for e in episodes),
@@ -220,5 +227,3 @@ def write_qa(
         "reports": [QA_REPORT_PATH.removeprefix("meta/qa/")],
     }
     (root / QA_SUMMARY_PATH).write_text(json.dumps(summary, indent=1))
-    (root / QA_REPORT_PATH).write_text(render_fleet_page(whole, dataset, run_number), encoding="utf-8")
-    return QA_REPORT_PATH

@@ -311,7 +311,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--parts", default="append,commit,dask")
+    parser.add_argument("--parts", default="append,commit,reduce,dask")
     parser.add_argument("--data", type=Path, default=REPO / "bench/.data")
     parser.add_argument("--report", type=Path, default=REPO / "BENCHMARKS.md")
     parser.add_argument("--results", type=Path, default=REPO / "bench/reduce_map.json")

@@ -6,12 +6,17 @@ worker gives the reduce, and whether the commit's memory stays flat with the num
   opened or read an existing data or video file (inotify on every one of them: 0 opens is 0 bytes read).
 - ``commit``: the commit step alone (``bagport.dataset.commit.commit_write``: ``meta/``, QA, provenance,
   checksums, publish) for a 100- and a 2,000-episode write, in a fresh process: its peak RSS (VmHWM).
+- ``reduce``: the flow process's side of a reduce (issue 14): read the staged summaries, select the episodes
+  (``bagport.selection.select_episodes``: every QA entry), open the write, the files written by a worker
+  process (as the flow's tasks are), then the commit with the QA entries (``meta/qa``: index, a detail page per
+  warned episode, and every W4 episode warns), for 100 and 2,000 episodes, in a fresh process: its peak RSS,
+  and with ``--trace`` tracemalloc's figures (what is held after the selection, and the peak).
 - ``dask``: the reduce of W1 (8 x 30 s, three 640x480 cameras; staged once) on a local Dask cluster of
   1 and of 2 worker processes: open the write, one ``write_planned_file`` per output file on the
   workers, then the commit; wall seconds.
 
 The machine is shared: every figure comes with the 1-minute load average when it was taken.
-Usage: python bench/reduce_map.py [--parts append,commit,dask] [--data DIR] [--report BENCHMARKS.md]
+Usage: python bench/reduce_map.py [--parts append,commit,reduce,dask] [--trace] [--data DIR] [--report BENCHMARKS.md]
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ import argparse
 import contextlib
 import importlib.util
 import json
+import multiprocessing
 import os
 import pickle
 import shutil
@@ -27,6 +33,7 @@ import statistics
 import subprocess
 import sys
 import time
+import tracemalloc
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
@@ -41,6 +48,10 @@ from bagport.dataset.commit import commit_write  # noqa: E402
 from bagport.dataset.files import write_planned_file  # noqa: E402
 from bagport.dataset.session import open_write  # noqa: E402
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for  # noqa: E402
+from bagport.episode.staged import PlannedEpisode  # noqa: E402
+from bagport.qa import QAConfig  # noqa: E402
+from bagport.reduce import read_staged  # noqa: E402
+from bagport.selection import select_episodes  # noqa: E402
 from bagport.staging import EpisodeSummary  # noqa: E402
 from bagport.video.settings import EncoderSettings  # noqa: E402
 from bench.report import write_section  # noqa: E402
@@ -180,6 +191,70 @@ def _reduce_on(client: Any, staged: list[EpisodeSummary], root: Path) -> tuple[f
     return wall, len(items)
 
 
+def _reduce_child(job: Path) -> None:
+    """In a fresh process, as the flow process does it: every staged summary read, the selection, the files
+    written by another process, the commit; then the peak RSS (and tracemalloc's, when asked)."""
+    episodes, root, trace = pickle.loads(job.read_bytes())
+    before = _status_kb("VmRSS")
+    if trace:
+        tracemalloc.start()
+    summaries, _ = read_staged(
+        [PlannedEpisode(uri, bag, entry) for entry, (uri, bag) in enumerate(episodes)]
+    )  # as bagport.reduce.start_reduce reads them
+    kept, entries = select_episodes(
+        summaries, [], policy="keep", keep_labelled=False, output=root, appending=False
+    )
+    held = tracemalloc.get_traced_memory()[0] if trace else 0
+    with (
+        open_write(kept, root) as session,
+        ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool,
+    ):
+        items = list(session.plan.files)
+        written = list(
+            pool.map(write_planned_file, [session.plan] * len(items), items, [session.build] * len(items))
+        )
+        commit_write(
+            session,
+            kept,
+            written,
+            robot_type="bench_arm",
+            run_record={},
+            qa=entries,
+            qa_config=QAConfig().model_dump(mode="json"),
+        )
+    peak_traced = tracemalloc.get_traced_memory()[1] if trace else 0
+    row = {"before_mb": before / 1024, "peak_mb": _status_kb("VmHWM") / 1024}
+    if trace:
+        row |= {"held_after_selection_mb": held / 2**20, "traced_peak_mb": peak_traced / 2**20}
+    print(json.dumps(row))
+
+
+def measure_reduce(
+    staged: list[EpisodeSummary], out: Path, sizes: Sequence[int], *, trace: bool
+) -> list[dict[str, float]]:
+    rows = []
+    for count in sizes:
+        root = out / f"reduce-{count}"
+        shutil.rmtree(root, ignore_errors=True)
+        job = out / f"reduce-{count}.pickle"
+        job.write_bytes(
+            pickle.dumps(([(s.dir_uri, s.bag_uri) for s in _repeat(staged, count)], str(root), trace))
+        )
+        load = _load()
+        started = time.perf_counter()
+        child = subprocess.run(
+            [sys.executable, __file__, "--reduce-child", str(job)], capture_output=True, text=True, check=True
+        )
+        wall = time.perf_counter() - started
+        rows.append(
+            {"episodes": count, "wall_s": wall, "load": load, **json.loads(child.stdout.splitlines()[-1])}
+        )
+        print(f"reduce of {count}: {rows[-1]}", flush=True)
+        shutil.rmtree(root)
+        job.unlink()
+    return rows
+
+
 def measure_dask(
     staged: list[EpisodeSummary], out: Path, workers: Sequence[int], repeats: int = 5
 ) -> list[dict[str, float]]:
@@ -230,6 +305,11 @@ _TABLES: dict[str, tuple[str, list[str], str]] = {
         ["episodes written", "commit wall s", "RSS before (imports) MB", "peak RSS MB", "load avg (1 min)"],
         "| {episodes} | {wall_s:.2f} | {before_mb:.0f} | {peak_mb:.0f} | {load:.1f} |",
     ),
+    "reduce": (
+        "The flow process's side of a reduce (summaries read, selection, commit with QA), in a fresh process:",
+        ["episodes written", "wall s", "RSS before (imports) MB", "peak RSS MB", "load avg (1 min)"],
+        "| {episodes} | {wall_s:.2f} | {before_mb:.0f} | {peak_mb:.0f} | {load:.1f} |",
+    ),
     "dask": (
         "The reduce of W1 (staged once) on a local Dask cluster:",
         ["workers", "reduce wall s (median)", "best s", "runs (taken in turns)", "output files (tasks)",
@@ -254,25 +334,32 @@ def main() -> None:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    parser.add_argument("--parts", default="append,commit,dask")
+    parser.add_argument("--parts", default="append,commit,reduce,dask")
     parser.add_argument("--data", type=Path, default=REPO / "bench/.data")
     parser.add_argument("--report", type=Path, default=REPO / "BENCHMARKS.md")
     parser.add_argument("--results", type=Path, default=REPO / "bench/reduce_map.json")
+    parser.add_argument("--trace", action="store_true", help="reduce: tracemalloc's figures too (slower)")
     parser.add_argument("--commit-child", type=Path, default=None, help=argparse.SUPPRESS)
+    parser.add_argument("--reduce-child", type=Path, default=None, help=argparse.SUPPRESS)
     args = parser.parse_args()
     if args.commit_child is not None:
         _commit_child(args.commit_child)
+        return
+    if args.reduce_child is not None:
+        _reduce_child(args.reduce_child)
         return
     parts = args.parts.split(",")
     out = args.data / "reduce-map"
     out.mkdir(parents=True, exist_ok=True)
     results = json.loads(args.results.read_text()) if args.results.is_file() else {}
-    if "append" in parts or "commit" in parts:
+    if "append" in parts or "commit" in parts or "reduce" in parts:
         small = stage("W4", args.data, episodes=NEW)
         if "append" in parts:
             results["append"] = measure_append(small, out, (100, 2000))
         if "commit" in parts:
             results["commit"] = measure_commit(small, out, (100, 2000))
+        if "reduce" in parts:
+            results["reduce"] = measure_reduce(small, out, (100, 2000), trace=args.trace)
     if "dask" in parts:
         results["dask"] = measure_dask(stage("W1", args.data), out, (1, 2))
     args.results.write_text(json.dumps(results, indent=1))

@@ -8,7 +8,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 from fsspec.core import url_to_fs
@@ -24,13 +24,14 @@ from bagport.qa import QAEntry, episode_ref
 from bagport.run import RunPlan, up_to_date, write_key
 from bagport.segment import kept_segmentation
 from bagport.selection import EpisodeFailure, select_episodes
-from bagport.staging import EpisodeSummary, read_summary
+from bagport.staging import EpisodeSummary, StagedFeature, read_summary
 from bagport.video import EncoderSettings
 
 __all__ = [
     "ReduceStart",
     "commit_reduce",
     "finish_up_to_date",
+    "read_staged",
     "reduce_run",
     "run_record",
     "start_reduce",
@@ -78,13 +79,47 @@ class ReduceStart:
     limits: DatasetLimits
 
 
-def start_reduce(
-    plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
-) -> ReduceStart | DatasetReport:
-    """Read the staged summaries, put on each what the current plan decides about it (manifest entry,
-    metadata, label: never the staged record's, which may come from another manifest) and apply the QA
-    policy. When no episode is kept (an append whose new bags were all excluded), the exclusions are
-    recorded and the dataset's report returned: nothing else is written."""
+_LEAN = ("alignment", "qa")
+"""Fields of a staged summary the reduce does not hold: the run record reads them back from the staged
+``episode.json`` as it writes each episode's entry (:func:`bagport.dataset.provenance.episode_provenance`)."""
+
+
+class _Shared:
+    """What many staged summaries have in common, held once: the features (a fleet's are usually one
+    tuple) and the keys of their dicts (JSON decoding makes new key strings for every file). The
+    alignment and QA digest, which only the run record needs, are left out (:data:`_LEAN`)."""
+
+    _MAX_FEATURES = 16
+
+    def __init__(self) -> None:
+        self.features: list[tuple[StagedFeature, ...]] = []
+        self.keys: dict[str, str] = {}
+
+    def summary(self, summary: EpisodeSummary) -> EpisodeSummary:
+        features = next((f for f in self.features if f == summary.features), None)
+        if features is None and len(self.features) < self._MAX_FEATURES:
+            self.features.append(summary.features)
+        changes = {
+            f.name: self._value(value)
+            for f in fields(EpisodeSummary)
+            if isinstance(value := getattr(summary, f.name), dict | list) and f.name not in _LEAN
+        }
+        return replace(summary, features=features or summary.features, alignment=[], qa={}, **changes)
+
+    def _value(self, value: Any) -> Any:
+        if isinstance(value, dict):
+            return {self.keys.setdefault(k, k): self._value(v) for k, v in value.items()}
+        if isinstance(value, list):
+            return [self._value(v) for v in value]
+        return value
+
+
+def read_staged(staged: Sequence[PlannedEpisode]) -> tuple[list[EpisodeSummary], list[PlannedEpisode]]:
+    """The staged summaries with what the current plan decides on each (:meth:`PlannedEpisode.apply`), and
+    the planned episodes with their source stamp. The reduce holds every kept summary from the selection to
+    the commit, so each is held small: common parts shared, the run record's alignment and QA digest left
+    to be read back (:class:`_Shared`)."""
+    shared = _Shared()
     summaries: list[EpisodeSummary] = []
     stamped: list[PlannedEpisode] = []
     for episode in staged:
@@ -93,8 +128,19 @@ def start_reduce(
             raise DatasetWriteError(
                 f"staged episode {episode.dir_uri} is incomplete (no episode.json); re-run the conversion."
             )
-        summaries.append(episode.apply(summary))
+        summaries.append(shared.summary(episode.apply(summary)))
         stamped.append(replace(episode, source_stamp=summary.source_stamp))
+    return summaries, stamped
+
+
+def start_reduce(
+    plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
+) -> ReduceStart | DatasetReport:
+    """Read the staged summaries, put on each what the current plan decides about it (manifest entry,
+    metadata, label: never the staged record's, which may come from another manifest) and apply the QA
+    policy. When no episode is kept (an append whose new bags were all excluded), the exclusions are
+    recorded and the dataset's report returned: nothing else is written."""
+    summaries, stamped = read_staged(staged)
     fs, out_path = url_to_fs(plan.config.output)
     kept, entries = select_episodes(
         summaries,

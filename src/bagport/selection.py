@@ -2,14 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
-import fsspec
 from pydantic import JsonValue
 
-from bagport.errors import DatasetWriteError, QualityError
+from bagport.errors import QualityError
 from bagport.qa import EpisodeQA, QAEntry
 from bagport.request import EpisodeRequest
 from bagport.segment import EXCLUDED_LABELS, label_reason
@@ -51,14 +49,10 @@ class _Episode:
     metadata: dict[str, JsonValue]
 
 
-def _read_qa(summary: EpisodeSummary) -> EpisodeQA:
-    try:
-        with fsspec.open(summary.file(QA_FILE), "r", encoding="utf-8") as handle:
-            return EpisodeQA.from_dict(json.load(handle))
-    except FileNotFoundError as err:
-        raise DatasetWriteError(
-            f"staged episode {summary.dir_uri} has no {QA_FILE} (staged by an older bagport); re-run the conversion."
-        ) from err
+def _read_qa(summary: EpisodeSummary) -> QAEntry:
+    """The staged episode's QA entry, holding the digest of its record (:meth:`QAEntry.of_staged`)."""
+    uri = summary.file(QA_FILE)
+    return QAEntry.of_staged(EpisodeQA.read(uri), uri, summary.manifest_entry)
 
 
 def select_episodes(
@@ -78,25 +72,25 @@ def select_episodes(
     ``keep_labelled`` keeps episodes labelled failed or discarded; ``appending`` (to an existing
     dataset) allows keeping nothing, so the exclusions are still recorded.
     """
-    rows: list[tuple[int, EpisodeQA, EpisodeSummary | None, _Episode]] = [
+    rows: list[tuple[int, QAEntry, EpisodeSummary | None, _Episode]] = [
         (s.manifest_entry, _read_qa(s), s, _Episode(s.segment, s.label, s.note, s.metadata))
         for s in summaries
     ]
     rows += [
         (
             f.manifest_entry,
-            EpisodeQA.failed(f.bag_uri, f.error),
+            QAEntry(EpisodeQA.failed(f.bag_uri, f.error), f.manifest_entry, None),
             None,
             _Episode(f.segment, f.label, f.note, f.metadata),
         )
         for f in failures
     ]
-    rows.sort(key=lambda row: (row[0], row[1].bag_uri, -1 if row[3].segment is None else row[3].segment))
+    rows.sort(key=lambda row: (row[0], row[1].qa.bag_uri, -1 if row[3].segment is None else row[3].segment))
     by_label = [not keep_labelled and row[3].label in EXCLUDED_LABELS for row in rows]
     failing = [
-        (entry, qa)
-        for (entry, qa, summary, _), labelled in zip(rows, by_label, strict=True)
-        if qa.verdict == "fail" and summary is not None and not labelled
+        (entry, base.qa)
+        for (entry, base, summary, _), labelled in zip(rows, by_label, strict=True)
+        if base.qa.verdict == "fail" and summary is not None and not labelled
     ]
     failed = [
         f for f in failures if keep_labelled or f.label not in EXCLUDED_LABELS
@@ -110,15 +104,16 @@ def select_episodes(
         )
     kept: list[EpisodeSummary] = []
     entries: list[QAEntry] = []
-    for (entry, qa, summary, episode), labelled in zip(rows, by_label, strict=True):
+    for (_, base, summary, episode), labelled in zip(rows, by_label, strict=True):
+        qa = base.qa
         if labelled:
-            row = QAEntry(qa, entry, None, label_reason(episode.label, episode.note), by_label=True)
+            row = replace(base, excluded_reason=label_reason(episode.label, episode.note), by_label=True)
         elif summary is None:
-            row = QAEntry(qa, entry, None, f"conversion failed: {qa.error}")
+            row = replace(base, excluded_reason=f"conversion failed: {qa.error}")
         elif qa.verdict == "fail" and policy == "exclude":
-            row = QAEntry(qa, entry, None, f"excluded by QA: {qa.headline()}")
+            row = replace(base, excluded_reason=f"excluded by QA: {qa.headline()}")
         else:
-            row = QAEntry(qa, entry, len(kept))
+            row = replace(base, episode_index=len(kept))
             kept.append(summary)
         entries.append(
             replace(

@@ -136,4 +136,5 @@ def test_layout_stats_and_provenance(converted: tuple[Path, Path]) -> None:
     run = json.loads((out / "meta/provenance/run.json").read_text())
     assert run["contract"]["text"] == SAMPLE_CONTRACT.read_text()
     assert all(e["bag_fingerprint"].startswith("sha256-index:") for e in run["episodes"])
+    assert all(e["alignment"] and e["qa"]["verdict"] for e in run["episodes"])  # read back, not held
     assert not Path(f"{out}.staging").exists()  # staging removed after success

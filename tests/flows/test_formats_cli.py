@@ -82,6 +82,7 @@ def test_every_format_holds_the_same_episodes_with_provenance(fleet: tuple[Path,
         assert [e["bag_uri"] for e in run["episodes"]] == [str(root / "ep0"), str(root / "ep1")], out
         assert [e["bag_uri"] for e in run["excluded"]] == [str(root / "broken.mcap")], out
         assert run["episodes"][0]["metadata"] == {"operator": "ana"}
+        assert all(e["alignment"] and e["qa"]["verdict"] for e in run["episodes"]), out  # read back
         assert (out / "meta/provenance/chunk-000/file-000.parquet").is_file()
     assert sorted(p.name for p in (root / "ds.hdf5").glob("*.hdf5")) == ["episode_0.hdf5", "episode_1.hdf5"]
     assert sorted(p.name for p in (root / "ds.robodm").glob("*.vla")) == ["episode_0.vla", "episode_1.vla"]

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -22,7 +23,7 @@ from fsspec.core import url_to_fs
 from bagport.dataset.base import DatasetBase
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, PROVENANCE_PATH, RUN_RECORD_PATH
-from bagport.staging import PROVENANCE_FILE, EpisodeSummary
+from bagport.staging import PROVENANCE_FILE, EpisodeSummary, read_summary
 
 __all__ = ["episode_provenance", "run_record_path", "write_provenance", "write_run_record"]
 
@@ -33,7 +34,11 @@ def run_record_path(base: DatasetBase | None) -> str:
 
 
 def episode_provenance(s: EpisodeSummary, i: int) -> dict[str, Any]:
-    """Where episode ``i`` came from (its entry in ``meta/provenance/run.json``; other formats write it too)."""
+    """Where episode ``i`` came from (its entry in ``meta/provenance/run.json``; other formats write it too).
+    A summary the reduce holds lean (no alignment or QA digest: :func:`bagport.reduce.read_staged`) gets
+    them back from its staged ``episode.json``, one episode at a time as the record is written."""
+    if not s.qa and (staged := read_summary(s.dir_uri)) is not None:
+        s = replace(s, alignment=staged.alignment, qa=staged.qa)
     return {
         "episode_index": i,
         "bag_uri": s.bag_uri,

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any, Literal
 
+import fsspec
 from pydantic import JsonValue
 
+from bagport.errors import DatasetWriteError
 from bagport.qa.config import Gate
 
 __all__ = [
@@ -15,6 +18,7 @@ __all__ = [
     "EpisodeQA",
     "QABrief",
     "QAEntry",
+    "StagedQA",
     "Verdict",
     "episode_name",
     "episode_ref",
@@ -67,16 +71,17 @@ SCORE_BANDS: dict[Verdict, tuple[float, float]] = {"fail": (0.0, 0.4), "warn": (
 """Score range per verdict: any hard failure scores below any warning, any warning below any pass."""
 
 
-def score_checks(checks: list[CheckResult]) -> tuple[float, Verdict]:
+def score_checks(checks: list[CheckResult], passed_elsewhere: int = 0) -> tuple[float, Verdict]:
     """The verdict (the worst check) and a score in [0, 1] that orders by severity first: inside the
     verdict's band (:data:`SCORE_BANDS`) it rises with the share of checks that passed, so a hard
-    failure is always below 0.4, a warning in [0.5, 0.9), a clean episode 1."""
+    failure is always below 0.4, a warning in [0.5, 0.9), a clean episode 1. ``passed_elsewhere``: more
+    checks that passed, not in ``checks`` (an :meth:`EpisodeQA.digest`'s)."""
     if not checks:
         return 1.0, "pass"
     verdicts = {c.verdict for c in checks}
     verdict: Verdict = "fail" if "fail" in verdicts else "warn" if "warn" in verdicts else "pass"
     low, high = SCORE_BANDS[verdict]
-    passed = sum(c.verdict == "pass" for c in checks) / len(checks)
+    passed = (sum(c.verdict == "pass" for c in checks) + passed_elsewhere) / (len(checks) + passed_elsewhere)
     return round(low + (high - low) * passed, 4), verdict
 
 
@@ -106,11 +111,24 @@ class EpisodeQA:
         check = CheckResult("coverage.convertible", "episode", 1.0, "fail", True, error)
         return cls(bag_uri, 0.0, "fail", [check], error=error)
 
-    def with_checks(self, extra: list[CheckResult]) -> EpisodeQA:
-        """This record with ``extra`` checks added (judged later, e.g. against the fleet), rescored."""
+    def with_checks(self, extra: list[CheckResult], passed_elsewhere: int = 0) -> EpisodeQA:
+        """This record with ``extra`` checks added (judged later, e.g. against the fleet), rescored
+        (``passed_elsewhere``: a digest's passing checks left out, :func:`score_checks`)."""
         checks = [*self.checks, *extra]
-        score, verdict = score_checks(checks)
+        score, verdict = score_checks(checks, passed_elsewhere)
         return replace(self, checks=checks, score=score, verdict=verdict)
+
+    def digest(self) -> EpisodeQA:
+        """This record without what only its detail page shows: the checks that did not pass, and of the
+        plots the episode's window (``window_ns``, the index's day) and each clip's fidelity minima (the
+        brief); score and verdict as they are. A fleet's entries hold this (:meth:`QAEntry.of_staged`)."""
+        plots: dict[str, Any] = {k: self.plots[k] for k in ("window_ns",) if k in self.plots}
+        if "fidelity" in self.plots:
+            plots["fidelity"] = {
+                key: {k: clip[k] for k in ("psnr_min_db", "damaged_frames") if k in clip}
+                for key, clip in self.plots["fidelity"].items()
+            }
+        return replace(self, checks=self.problems, plots=plots)
 
     @property
     def problems(self) -> list[CheckResult]:
@@ -135,6 +153,18 @@ class EpisodeQA:
         checks = [CheckResult(**c) for c in data["checks"]]
         return cls(**{**data, "checks": checks})
 
+    @classmethod
+    def read(cls, uri: str) -> EpisodeQA:
+        """A staged episode's record (its ``qa.json``, written by the worker)."""
+        try:
+            with fsspec.open(uri, "r", encoding="utf-8") as handle:
+                return cls.from_dict(json.load(handle))
+        except FileNotFoundError as err:
+            raise DatasetWriteError(
+                f"the staged QA record {uri} is missing (staged by an older bagport, or removed since); nothing "
+                "was written. Fix: re-run the conversion (it stages the episode again)."
+            ) from err
+
 
 def episode_ref(bag_uri: str, segment: int | None) -> str:
     """A bag (URI or name), with ``#<segment>`` for one episode of several in a bag."""
@@ -144,6 +174,18 @@ def episode_ref(bag_uri: str, segment: int | None) -> str:
 def episode_name(bag_uri: str, segment: int | None) -> str:
     """The bag's file name, with ``#<segment>`` for one episode of several in a bag."""
     return episode_ref(bag_uri.rstrip("/").rsplit("/", 1)[-1], segment)
+
+
+@dataclass(frozen=True, slots=True)
+class StagedQA:
+    """Where a digest entry's whole QA record is (:meth:`QAEntry.of_staged`)."""
+
+    uri: str
+    """The staged ``qa.json``."""
+    passed: int
+    """Its checks that passed (left out of the digest)."""
+    problems: int
+    """How many of the digest's checks are the record's (those after them were added later)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -165,6 +207,31 @@ class QAEntry:
     metadata: dict[str, JsonValue] = field(default_factory=dict)
     """The episode's metadata: its manifest entry's columns (``robot_id``...) and the recorder's
     ``episode_id`` from episode events."""
+    staged: StagedQA | None = None
+    """Set when :attr:`qa` is a digest (:meth:`EpisodeQA.digest`) of the staged record; :meth:`whole`
+    reads the rest back. ``None``: :attr:`qa` is whole."""
+
+    @classmethod
+    def of_staged(cls, qa: EpisodeQA, uri: str, manifest_entry: int) -> QAEntry:
+        """The entry of a staged episode whose record ``qa`` was read from ``uri``, holding its digest: a
+        fleet's entries stay small from the selection to the commit, which reads each record back once."""
+        digest = qa.digest()
+        staged = StagedQA(uri, len(qa.checks) - len(digest.checks), len(digest.checks))
+        return cls(digest, manifest_entry, None, staged=staged)
+
+    def with_checks(self, extra: list[CheckResult]) -> QAEntry:
+        """This entry with ``extra`` checks added to its record (:meth:`EpisodeQA.with_checks`), rescored."""
+        passed = 0 if self.staged is None else self.staged.passed
+        return replace(self, qa=self.qa.with_checks(extra, passed))
+
+    def whole(self) -> QAEntry:
+        """This entry with its whole record (every check, every plot): the staged record read back, with
+        the checks added since; itself when it holds its record whole."""
+        if self.staged is None:
+            return self
+        added = self.qa.checks[self.staged.problems :]
+        qa = EpisodeQA.read(self.staged.uri).with_checks(added) if added else EpisodeQA.read(self.staged.uri)
+        return replace(self, qa=qa, staged=None)
 
     @property
     def name(self) -> str:

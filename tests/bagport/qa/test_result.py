@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import json
 from dataclasses import replace
+from pathlib import Path
 
 from hypothesis import given
 from hypothesis import strategies as st
@@ -55,3 +57,34 @@ def test_a_brief_is_one_typed_row_whose_json_is_the_summary_shape() -> None:
     stamped = replace(brief, source_stamp="size:1").to_json()
     assert list(stamped)[-1] == "source_stamp"
     assert stamped["metadata"] == {"robot_id": "arm-1"}
+
+
+def test_a_staged_entry_holds_a_digest_and_reads_its_record_back(tmp_path: Path) -> None:
+    checks = [
+        CheckResult("rates.rate_ratio", "/joint_states", 0.98, "pass", False, "98 of 100"),
+        CheckResult("coverage.min_duration_s", "episode", 0.97, "warn", True, "lasts 0.97 s"),
+        CheckResult("values.jumps", "action", 0.1, "pass", False, "small"),
+    ]
+    plots = {
+        "window_ns": [1, 2],
+        "thumbnails": {"observation.images.front": [{"t_s": 0.0, "jpeg": "A" * 4000}]},
+        "vectors": {"action": [[0.0, 1.0]]},
+        "fidelity": {"observation.images.front": {"psnr_min_db": 41.5, "damaged_frames": 1, "psnr_db_per_frame": [41.5]}},
+    }  # fmt: skip
+    record = EpisodeQA.build("/bags/a.mcap", checks, duration_s=0.97, frames=29, plots=plots)
+    uri = tmp_path / "qa.json"
+    uri.write_text(json.dumps(record.to_dict()))
+    full = QAEntry(record, 4, 0)
+    entry = replace(QAEntry.of_staged(EpisodeQA.read(str(uri)), str(uri), 4), episode_index=0)
+
+    assert "thumbnails" not in entry.qa.plots and "vectors" not in entry.qa.plots  # held per episode: small
+    assert entry.qa.checks == record.problems
+    assert entry.brief() == full.brief()  # the index, summary and run record see the same
+    assert entry.whole() == full
+    extra = [
+        CheckResult("values.step_outlier", "action", 9.0, "warn", False, "a jump"),
+        CheckResult("values.step_outlier", "observation.state", 1.0, "pass", False, "fine"),
+    ]
+    assert entry.with_checks(extra).qa.score == full.with_checks(extra).qa.score
+    assert entry.with_checks(extra).whole() == full.with_checks(extra)
+    assert full.whole() is full

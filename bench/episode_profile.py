@@ -33,7 +33,7 @@ COUNTED = {
     "bag opened": ("bags/reader.py", "open_bag"),
     "messages read from the bag (both passes)": ("bags/reader.py", "messages"),
     "messages deserialised": ("bags/typesources.py", "__call__"),
-    "bag type definitions parsed": ("bags/typesources.py", "parse_msg_definitions"),
+    "bag type definitions parsed (rosbags)": ("typesys/msg.py", "get_types_from_msg"),
     "YAML documents loaded": ("yamlsource.py", "load_plain"),
     "video encoder opened": ("video/encode.py", "__init__"),
     "clip containers opened (av.open)": ("~", "<av.container.core.open>"),
@@ -43,6 +43,36 @@ COUNTED = {
     "JPEG thumbnails encoded (QA strip)": ("qa/values.py", "_thumbnail"),
     "JPEG worst-frame panels encoded": ("episode/fidelity.py", "_jpeg_base64"),
 }
+
+
+PHASES = {
+    "contract parsed": ("contract/load.py", "parse_contract"),
+    "bag's files listed (source stamp)": ("bags/stamp.py", "source_stamp"),
+    "dead-scratch sweep": ("bagport/scratch.py", "clean_dead_scratch"),
+    "bag opened (metadata, index, types)": ("bags/reader.py", "open_bag"),
+    "pass 1: timeline scan": ("episode/timeline.py", "scan_timeline"),
+    "alignment": ("episode/alignment.py", "align_sources"),
+    "pass 2: read, deserialise, decode JPEG": ("episode/assemble.py", "iter_frames"),
+    "sinks: encode, image stats, QA monitor, fidelity refs": ("episode/sinks.py", "add"),
+    "encoder flush, frame table close": ("episode/sinks.py", "close"),
+    "fidelity check (decode sampled GOPs of the clip)": ("episode/fidelity.py", "check"),
+    "QA scoring": ("episode/quality.py", "assess_episode"),
+    "qa.json (to_dict + dumps)": ("qa/result.py", "to_dict"),
+    "provenance table": ("episode/sinks.py", "write_provenance"),
+    "stats partials": ("episode/sinks.py", "stats"),
+    "publish to staging (copies, episode.json)": ("episode/convert.py", "_publish"),
+    "folders removed (work folder, scratch)": ("shutil.py", "rmtree"),
+}
+"""Where an episode's time goes: the cumulative time of each step's function (the outermost of that name)."""
+
+
+def _phases(stats: pstats.Stats, episodes: int) -> dict[str, float]:
+    found = dict.fromkeys(PHASES, 0.0)
+    for (file, _line, name), (_cc, _calls, _tt, cumulative, _callers) in stats.stats.items():  # type: ignore[attr-defined]
+        for what, (where, function) in PHASES.items():
+            if file.endswith(where) and name == function:
+                found[what] = max(found[what], cumulative / episodes)
+    return found
 
 
 def _counts(stats: pstats.Stats, episodes: int) -> dict[str, float]:
@@ -87,6 +117,10 @@ def main(argv: list[str] | None = None) -> None:
     if profile is None:
         return
     stats = pstats.Stats(profile)
+    total = stats.total_tt / len(todo)  # type: ignore[attr-defined]
+    print(f"profiled: {total:.4f} s per episode (cProfile's clock; the encoder's own threads not included)")
+    for what, seconds in _phases(stats, len(todo)).items():
+        print(f"  {1000 * seconds:7.2f} ms  {what}")
     for what, calls in _counts(stats, len(todo)).items():
         print(f"  {what}: {calls:g} per episode")
     if args.top:

@@ -31,7 +31,7 @@ REPO = Path(__file__).resolve().parents[1]
 COUNTED = {
     "contract parsed": ("contract/load.py", "parse_contract"),
     "bag opened": ("bags/reader.py", "open_bag"),
-    "messages read from the bag (both passes)": ("bags/reader.py", "messages"),
+    "messages read from the bag (both passes; +1 per read)": ("bags/reader.py", "messages"),
     "messages deserialised": ("bags/typesources.py", "__call__"),
     "bag type definitions parsed (rosbags)": ("typesys/msg.py", "get_types_from_msg"),
     "YAML documents loaded": ("yamlsource.py", "load_plain"),

@@ -17,6 +17,7 @@ A type that no source defines is remembered, and reading its topic fails with
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Collection, Iterable, Mapping
 from typing import Any
 
@@ -90,7 +91,7 @@ def parse_msg_definitions(definitions: Mapping[str, str], source: str = "--msg-p
     typs: Typesdict = {}
     for name, text in definitions.items():
         try:
-            typs.update(get_types_from_msg(text, name))
+            typs.update(_types_from_msg(text, name))
         except (TypesysError, ValueError) as err:
             raise BagReadError(
                 f"the definition of {name} cannot be parsed ({one_line(err)})",
@@ -98,6 +99,13 @@ def parse_msg_definitions(definitions: Mapping[str, str], source: str = "--msg-p
                 fix=f"fix the file {name}.msg (ROS 2 .msg syntax).",
             ) from err
     return typs
+
+
+@functools.lru_cache(maxsize=256)
+def _types_from_msg(text: str, name: str) -> Typesdict:
+    """rosbags' parse of one definition, once per process (every bag opened parses bagport's bundled
+    types; callers copy the entries out and never change them). Errors are raised each time."""
+    return get_types_from_msg(text, name)
 
 
 def _dependencies(fields: Iterable[tuple[str, Any]]) -> list[str]:

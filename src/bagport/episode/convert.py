@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import json
 import shutil
+import time
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -52,6 +54,27 @@ from bagport.video import ClipInfo, EncoderSettings
 
 __all__ = ["convert_episode"]
 
+_SCRATCH_SWEEP_S = 60.0
+"""A worker looks for the scratch folders of dead processes at most this often (it lists the temp dir)."""
+_last_sweep_s: list[float] = []
+
+
+@lru_cache(maxsize=8)
+def _contract_plan(text: str, name: str) -> ContractPlan:
+    """The parsed contract, once per process for each contract (a worker converts many episodes with one;
+    the plan is immutable). An invalid contract raises each time (errors are not cached)."""
+    return parse_contract(text, name)
+
+
+def _sweep_dead_scratch() -> None:
+    """A worker on another host cleans after its own killed predecessors: at its first episode, then at
+    most every :data:`_SCRATCH_SWEEP_S`."""
+    now_s = time.monotonic()
+    if _last_sweep_s and now_s - _last_sweep_s[0] < _SCRATCH_SWEEP_S:
+        return
+    _last_sweep_s[:] = [now_s]
+    clean_dead_scratch()
+
 
 @dataclass(frozen=True, slots=True)
 class _Episode:
@@ -77,13 +100,13 @@ def convert_episode(request: EpisodeRequest) -> EpisodeSummary:
     Raises a :class:`bagport.errors.BagportError` subclass naming the bag, topic
     and time of any problem; on error nothing is left in the staging store.
     """
-    plan = parse_contract(request.contract_text, request.contract_name)
+    plan = _contract_plan(request.contract_text, request.contract_name)
     settings = request.encoder
     stamp = source_stamp(request.bag_uri)
     reusable = _reusable(request, stamp)
     if reusable is not None:
         return reusable
-    clean_dead_scratch()  # a worker on another host cleans after its own killed predecessors
+    _sweep_dead_scratch()
     with open_bag(request.bag_uri, msg_definitions=request.msg_definitions) as whole:
         prepared = prepare_episode(whole, plan, request)
         alignment = prepared.alignment
@@ -109,7 +132,7 @@ def _stage(episode: _Episode) -> EpisodeSummary:
     plan, workdir, alignment = episode.plan, episode.workdir, episode.prepared.alignment
     monitor = ValueMonitor(episode.qa_config.values, plan.fps, alignment.frames)
     gop = episode.settings.g or 1
-    fidelity = EpisodeFidelity(episode.qa_config.video, workdir / "fidelity-refs", gop)
+    fidelity = EpisodeFidelity(episode.qa_config.video, workdir, gop)  # its files go before publishing
     sinks = EpisodeSinks(workdir, plan, episode.settings, episode.frame_tasks, monitor, fidelity)
     features = [f for f in plan.features if f.key not in episode.reused]
     try:
@@ -290,9 +313,13 @@ def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:
     if fs.exists(path):
         fs.rm(path, recursive=True)
     fs.makedirs(path, exist_ok=True)
+    made = {path.rstrip("/")}
     for item in sorted(workdir.rglob("*")):
         if item.is_file():
             remote = staged_path(path, item.relative_to(workdir).as_posix())
-            fs.makedirs(remote.rsplit("/", 1)[0], exist_ok=True)
+            parent = remote.rsplit("/", 1)[0]
+            if parent not in made:
+                fs.makedirs(parent, exist_ok=True)
+                made.add(parent)
             fs.put_file(str(item), remote)
     write_json(staged_path(target, EPISODE_SUMMARY), summary.to_dict())

@@ -39,8 +39,12 @@ class EpisodeFidelity:
     """One episode's recorders (one per camera) and, at the end, its ``video.*`` checks."""
 
     def __init__(self, config: VideoQA, scratch: Path, gop: int) -> None:
+        """``scratch``: the folder of the reference files (``fidelity-<key>.*``); made, and removed by
+        :meth:`discard`, when it does not exist (an episode's work folder: only the files go)."""
         self._config = config
         self._scratch = scratch
+        self._owns_scratch = False
+        """Whether this object made the folder (then it removes it; else only its own files)."""
         self._gop = max(1, gop)
         self._recorders: dict[str, FidelityRecorder] = {}
         self._depth: dict[str, DepthFidelityRecorder] = {}
@@ -58,15 +62,13 @@ class EpisodeFidelity:
         if kind is ImageKind.DEPTH:
             depth = self._depth.get(key)
             if depth is None:
-                self._scratch.mkdir(parents=True, exist_ok=True)
-                depth = self._depth[key] = DepthFidelityRecorder(self._scratch / f"{key}.crc32")
+                depth = self._depth[key] = DepthFidelityRecorder(self._folder() / f"fidelity-{key}.crc32")
             depth.record(rgb.astype(np.uint16, copy=False))
             return
         recorder = self._recorders.get(key)
         if recorder is None:
-            self._scratch.mkdir(parents=True, exist_ok=True)
             recorder = FidelityRecorder(
-                self._scratch / f"{key}.refs",
+                self._folder() / f"fidelity-{key}.refs",
                 height=rgb.shape[0],
                 width=rgb.shape[1],
                 block=self._config.block_px,
@@ -75,6 +77,12 @@ class EpisodeFidelity:
             )
             self._recorders[key] = recorder
         recorder.record(rgb.astype(np.uint8, copy=False))
+
+    def _folder(self) -> Path:
+        if not self._scratch.is_dir():
+            self._scratch.mkdir(parents=True)
+            self._owns_scratch = True
+        return self._scratch
 
     def check(self, clips: dict[str, ClipInfo], fps: int) -> tuple[list[CheckResult], dict[str, Any]]:
         """Compare every closed clip with its references; returns the checks and the report data."""
@@ -140,7 +148,9 @@ class EpisodeFidelity:
             depth.discard()
         self._recorders.clear()
         self._depth.clear()
-        shutil.rmtree(self._scratch, ignore_errors=True)
+        if self._owns_scratch:
+            shutil.rmtree(self._scratch, ignore_errors=True)
+            self._owns_scratch = False
 
 
 def _frame_check(key: str, result: ClipFidelity, config: VideoQA) -> CheckResult:

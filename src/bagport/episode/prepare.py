@@ -16,6 +16,7 @@ from bagport.bags import BagReader, BagWindow
 from bagport.contract import ContractPlan
 from bagport.episode.alignment import Alignment, align_sources
 from bagport.episode.checks import check_bag_fits, check_window_has_data
+from bagport.episode.replay import replayable
 from bagport.episode.timeline import Timeline, scan_plan_timeline
 from bagport.request import EpisodeRequest
 from bagport.timewindow import WindowNs
@@ -28,7 +29,8 @@ class PreparedEpisode:
     """One episode of an open bag, scanned and aligned."""
 
     whole: BagReader
-    """The open bag."""
+    """The open bag (a small one behind a :class:`~bagport.episode.replay.ReplayReader`: pass 2 replays
+    pass 1's read)."""
     reader: BagReader
     """The episode's window of it (the whole bag without one)."""
     timeline: Timeline
@@ -42,6 +44,7 @@ def prepare_episode(whole: BagReader, plan: ContractPlan, request: EpisodeReques
     in the window: its reader, timeline, window and alignment."""
     info = whole.info
     check_bag_fits(info, plan)
+    whole = replayable(whole)
     window = request.window.resolve(info.start_ns, info.end_ns)
     reader: BagReader = whole if window is None else BagWindow(whole, *window)
     timeline = scan_plan_timeline(whole, plan, window)

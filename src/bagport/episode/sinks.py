@@ -63,6 +63,9 @@ class FrameTableWriter:
         self._frame_index: list[int] = []
         self._task: list[str] = []
         self._values: dict[str, list[npt.NDArray[Any]]] = {key: [] for key in vector_dtypes}
+        self._only_batch: dict[str, npt.NDArray[Any]] | None = None
+        """The vectors written, while they are one batch (a short episode): stats need no read back."""
+        self._batches = 0
         self.frames = 0
 
     def add(self, frame_index: int, task: str, values: dict[str, npt.NDArray[np.float64]]) -> None:
@@ -83,9 +86,12 @@ class FrameTableWriter:
             "frame_index": pa.array(index),
             "task": pa.array(self._task, type=pa.string()),
         }
+        written: dict[str, npt.NDArray[Any]] = {}
         for key, rows in self._values.items():
-            stacked = np.stack(rows).astype(self._dtypes[key])
+            stacked = written[key] = np.stack(rows).astype(self._dtypes[key])
             columns[key] = pa.FixedSizeListArray.from_arrays(pa.array(stacked.ravel()), stacked.shape[1])
+        self._batches += 1
+        self._only_batch = written if self._batches == 1 else None
         batch = pa.table(columns)
         if self._writer is None or self._schema is None:
             self._schema = batch.schema
@@ -99,6 +105,13 @@ class FrameTableWriter:
         if self._writer is not None:
             self._writer.close()
             self._writer = None
+
+    def written_vectors(self, keys: Sequence[str]) -> dict[str, npt.NDArray[np.float64]] | None:
+        """Each of ``keys`` as the (rows, dims) float64 values the closed table holds, when they were
+        written in one batch (else ``None``: read the table back)."""
+        if self._writer is not None or self._only_batch is None or not set(keys) <= self._only_batch.keys():
+            return None
+        return {key: np.asarray(self._only_batch[key], dtype=np.float64) for key in keys}
 
 
 PROVENANCE_SCHEMA = pa.schema(
@@ -328,11 +341,17 @@ class EpisodeSinks:
     def stats(self, vector_keys: Sequence[str]) -> dict[str, Any]:
         """Per-episode stats partials of the vectors (read back from the closed frame table) and cameras."""
         stats: dict[str, Any] = {}
-        table = pq.read_table(self.workdir / FRAMES_FILE, columns=list(vector_keys))
-        for name in table.column_names:
-            values = vector_column(table, name)
+        for name, values in self._vectors(vector_keys).items():
             stats[name] = {**stats_to_json(vector_stats(values)), **episode_sketch_fields(values)}
         for key, camera in self.cameras.items():
             acc = camera.stats
             stats[key] = {**stats_to_json(acc.result()), "histogram": acc.histogram().tolist()}
         return stats
+
+    def _vectors(self, keys: Sequence[str]) -> dict[str, npt.NDArray[np.float64]]:
+        """The vectors of the closed frame table: in hand for a short episode, else read back."""
+        in_hand = self.frames.written_vectors(keys)
+        if in_hand is not None:
+            return in_hand
+        table = pq.read_table(self.workdir / FRAMES_FILE, columns=list(keys))
+        return {name: vector_column(table, name) for name in table.column_names}

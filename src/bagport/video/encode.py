@@ -112,7 +112,7 @@ class StreamingEncoder:
             fps=self._fps,
             width=self._shape[1],
             height=self._shape[0],
-            codec=_stream_codec_name(self._path),
+            codec=_stream_codec_name(self._path, self._settings.codec),
             pix_fmt=self._settings.pix_fmt,
             size_bytes=self._path.stat().st_size,
         )
@@ -151,10 +151,19 @@ def _quiet(options: dict[str, str]) -> dict[str, str]:
     return options
 
 
-def _stream_codec_name(path: Path) -> str:
-    """The stream's codec as decoders name it (``av1``, ``h264``), as LeRobot records it."""
+_CODEC_NAMES: dict[str, str] = {}
+"""Encoder name -> the codec name its clips have (read from the first clip this process wrote)."""
+
+
+def _stream_codec_name(path: Path, encoder: str) -> str:
+    """The stream's codec as decoders name it (``av1``, ``h264``), as LeRobot records it: read from the
+    first clip an encoder wrote in this process (the same encoder always writes the same codec)."""
+    name = _CODEC_NAMES.get(encoder)
+    if name is not None:
+        return name
     container: Any = av.open(str(path))
     try:
-        return str(container.streams.video[0].codec.canonical_name)
+        name = _CODEC_NAMES[encoder] = str(container.streams.video[0].codec.canonical_name)
     finally:
         container.close()
+    return name

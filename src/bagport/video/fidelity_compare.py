@@ -8,7 +8,7 @@ from dataclasses import dataclass, field
 from fractions import Fraction
 from itertools import chain
 from pathlib import Path
-from typing import Any
+from typing import Any, BinaryIO
 
 import av
 import numpy as np
@@ -26,7 +26,8 @@ class ReferenceFile:
     """The block-mean references of a clip, read one sample at a time from their file.
 
     Read, not memory-mapped: the pages of a mapping count towards the process's memory and stay
-    while it is open, so a long episode's comparison would grow with its length.
+    while it is open, so a long episode's comparison would grow with its length. The file is opened
+    once, at the first read, until :meth:`close`.
     """
 
     def __init__(self, path: Path, dtype: npt.DTypeLike, shape: tuple[int, ...], count: int) -> None:
@@ -35,6 +36,7 @@ class ReferenceFile:
         self._shape = shape
         self._bytes = int(np.prod(shape)) * self._dtype.itemsize
         self._count = count
+        self._handle: BinaryIO | None = None
 
     def __len__(self) -> int:
         return self._count
@@ -42,10 +44,17 @@ class ReferenceFile:
     def __getitem__(self, slot: int) -> npt.NDArray[Any]:
         if not 0 <= slot < self._count:
             raise IndexError(slot)
-        with self._path.open("rb") as handle:
-            handle.seek(slot * self._bytes)
-            data = handle.read(self._bytes)
+        if self._handle is None:
+            self._handle = self._path.open("rb")
+        self._handle.seek(slot * self._bytes)
+        data = self._handle.read(self._bytes)
         return np.frombuffer(data, dtype=self._dtype).reshape(self._shape)
+
+    def close(self) -> None:
+        """Close the file (idempotent; a later read opens it again)."""
+        if self._handle is not None:
+            self._handle.close()
+            self._handle = None
 
 
 @dataclass(frozen=True, slots=True)
@@ -225,6 +234,7 @@ def compare_frames(
         scores.decode_error = f"decoding stopped: {err}"
     finally:
         container.close()
+        refs.close()
     scores.keep(scored)
     scores.worst = _frame_pair(worst, grid)
     return scores

@@ -22,7 +22,7 @@ from fsspec.core import url_to_fs
 from bagport import __version__
 from bagport.bags import open_bag, source_stamp
 from bagport.contract import ContractPlan, FeatureKind, parse_contract
-from bagport.dataset.data_files import episode_data_bytes
+from bagport.data_table import episode_data_bytes
 from bagport.episode.alignment import Alignment
 from bagport.episode.assemble import iter_frames
 from bagport.episode.checks import bag_fingerprint

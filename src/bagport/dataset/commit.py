@@ -91,6 +91,12 @@ def gather(session: WriteSession, written: Sequence[WrittenFile], episodes: int)
             data[position], counts[position] = placed, pairs
         for position, video in zip(result.item.episodes, result.videos, strict=False):
             videos[result.item.key][position] = video
+    missing = [n for n, placed in enumerate(data) if placed is None]
+    if missing:  # a writer's result without one of its episodes: never a dataset with rows out of place
+        raise DatasetWriteError(
+            f"no data file holds kept episode(s) at position(s) {missing[:5]} of this run; nothing was "
+            "published. This is a bug in bagport's file plan: please report it with the run's log."
+        )
     task_indices = [
         np.repeat(np.array([i for i, _ in pairs], dtype=np.int64), [n for _, n in pairs]) for pairs in counts
     ]

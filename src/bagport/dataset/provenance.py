@@ -23,6 +23,7 @@ from fsspec.core import url_to_fs
 from bagport.dataset.base import DatasetBase
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, PROVENANCE_PATH, RUN_RECORD_PATH
+from bagport.errors import DatasetWriteError
 from bagport.staging import PROVENANCE_FILE, EpisodeSummary, read_summary
 
 __all__ = ["episode_provenance", "run_record_path", "write_provenance", "write_run_record"]
@@ -37,7 +38,14 @@ def episode_provenance(s: EpisodeSummary, i: int) -> dict[str, Any]:
     """Where episode ``i`` came from (its entry in ``meta/provenance/run.json``; other formats write it too).
     A summary the reduce holds lean (no alignment or QA digest: :func:`bagport.reduce.read_staged`) gets
     them back from its staged ``episode.json``, one episode at a time as the record is written."""
-    if not s.qa and (staged := read_summary(s.dir_uri)) is not None:
+    if not s.qa:
+        staged = read_summary(s.dir_uri)
+        if staged is None:
+            raise DatasetWriteError(
+                f"the staged episode {s.dir_uri} (from {s.bag_uri}) is gone since this run selected it, so "
+                "its provenance cannot be written; nothing was published. Fix: re-run the conversion (it "
+                "stages the episode again), and keep other runs from cleaning this staging store meanwhile."
+            )
         s = replace(s, alignment=staged.alignment, qa=staged.qa)
     return {
         "episode_index": i,

@@ -41,11 +41,10 @@ class _Read:
     messages: list[BagMessage]
 
     def covers(self, topics: frozenset[str] | None, start_ns: int | None, stop_ns: int | None) -> bool:
-        if self.topics is None:
-            return topics is None
+        """Whether this read holds every message the asked read gives: its topics and its window."""
+        holds_topics = self.topics is None or (topics is not None and topics <= self.topics)
         return (
-            topics is not None
-            and topics <= self.topics
+            holds_topics
             and (self.start_ns is None or (start_ns is not None and start_ns >= self.start_ns))
             and (self.stop_ns is None or (stop_ns is not None and stop_ns <= self.stop_ns))
         )

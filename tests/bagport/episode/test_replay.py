@@ -66,6 +66,22 @@ def test_a_covered_read_is_served_from_memory_in_the_bags_order(bag: Path) -> No
         assert counting.reads == 2
 
 
+def test_a_windowed_read_of_every_topic_serves_no_wider_read(bag: Path) -> None:
+    with open_bag(str(bag)) as whole:
+        middle_ns = (whole.info.start_ns + whole.info.end_ns) // 2
+        direct_all = _facts(whole.messages(None))
+        counting = _Counting(whole)
+        reader = ReplayReader(counting)
+        window = _facts(reader.messages(None, start_ns=middle_ns))
+        assert window and len(window) < len(direct_all) and reader.replays == 1
+        assert _facts(reader.messages(None)) == direct_all  # the whole bag: read from the bag again
+        assert counting.reads == 2
+        later_ns = (middle_ns + whole.info.end_ns) // 2
+        assert _facts(reader.messages(None, start_ns=later_ns)) == _facts(
+            whole.messages(None, start_ns=later_ns)
+        )
+
+
 def test_an_unfinished_or_too_large_read_is_not_kept(bag: Path) -> None:
     with open_bag(str(bag)) as whole:
         topics = [t.name for t in whole.info.topics]

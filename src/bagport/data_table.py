@@ -49,18 +49,21 @@ def hf_features_metadata(vectors: Sequence[StagedFeature]) -> bytes:
 
 
 def episode_table(
-    frames_uri: str,
+    frames: str | pa.Table,
     episode_index: int,
     first_index: int,
     task_index: Mapping[str, int] | None,
     vectors: Sequence[StagedFeature],
 ) -> pa.Table:
-    """The episode's rows as a data file holds them (``task_index``: ``None`` numbers the episode's own
-    tasks in the order they first appear)."""
-    fs, path = url_to_fs(frames_uri)
-    with fs.open(path, "rb") as handle:
-        staged = pq.read_table(handle)
-    frames = staged.num_rows
+    """The episode's rows as a data file holds them, from its staged frame table (by URI, or the table in
+    hand); ``task_index``: ``None`` numbers the episode's own tasks in the order they first appear."""
+    if isinstance(frames, pa.Table):
+        staged = frames
+    else:
+        fs, path = url_to_fs(frames)
+        with fs.open(path, "rb") as handle:
+            staged = pq.read_table(handle)
+    rows = staged.num_rows
     tasks = [str(t) for t in staged.column("task").to_pylist()]
     numbers = task_index if task_index is not None else {t: i for i, t in enumerate(dict.fromkeys(tasks))}
     columns: dict[str, Any] = {
@@ -69,8 +72,8 @@ def episode_table(
     }
     columns["timestamp"] = staged.column("timestamp")
     columns["frame_index"] = staged.column("frame_index")
-    columns["episode_index"] = pa.array(np.full(frames, episode_index, dtype=np.int64))
-    columns["index"] = pa.array(np.arange(first_index, first_index + frames, dtype=np.int64))
+    columns["episode_index"] = pa.array(np.full(rows, episode_index, dtype=np.int64))
+    columns["index"] = pa.array(np.arange(first_index, first_index + rows, dtype=np.int64))
     columns["task_index"] = pa.array(np.array([numbers[t] for t in tasks], dtype=np.int64))
     return pa.table(columns)
 
@@ -86,16 +89,20 @@ class DataTableWriter:
     def add(self, table: pa.Table) -> None:
         self.parquet.write_table(table.cast(self.schema), row_group_size=max(1, table.num_rows))
 
+    def close(self) -> None:
+        self.parquet.close()
 
-def episode_data_bytes(frames_uri: str, vectors: Sequence[StagedFeature]) -> int:
+
+def episode_data_bytes(frames: str | pa.Table, vectors: Sequence[StagedFeature]) -> int:
     """The bytes the episode's row group adds to a data file (what LeRobot's rotation rule counts),
-    encoded as :func:`bagport.dataset.data_files.write_data_file` encodes it but with episode and global indices from 0: the final
-    ``index`` values change the snappy-compressed size by a few bytes (the plan's estimate, docs/fleet.md)."""
-    table = episode_table(frames_uri, 0, 0, None, vectors)
+    encoded as :func:`bagport.dataset.data_files.write_data_file` encodes it but with episode and global
+    indices from 0: the final ``index`` values change the snappy-compressed size by a few bytes (the plan's
+    estimate, docs/fleet.md). ``frames``: the staged frame table, by URI or in hand."""
+    table = episode_table(frames, 0, 0, None, vectors)
     sink = pa.BufferOutputStream()
     writer = DataTableWriter(sink, table, vectors)
     try:
         writer.add(table)
         return int(sink.tell()) - PARQUET_MAGIC_BYTES  # the row group; the footer comes at close
     finally:
-        writer.parquet.close()
+        writer.close()

@@ -100,5 +100,5 @@ def write_data_file(
             first_index += table.num_rows
     finally:
         if writer is not None:
-            writer.parquet.close()
+            writer.close()
     return DataWritten(tuple(placements), tuple(counts))

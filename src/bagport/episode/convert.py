@@ -17,6 +17,7 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
+import pyarrow as pa
 from fsspec.core import url_to_fs
 
 from bagport import __version__
@@ -155,7 +156,8 @@ def _stage(episode: _Episode) -> EpisodeSummary:
     stats = sinks.stats([f.key for f in staged if f.video_info is None])
     stats.update({key: clip.stats for key, clip in episode.reused.items()})
     (workdir / STATS_FILE).write_text(json.dumps(stats))
-    summary = _summary(episode, staged, qa)
+    frames = sinks.frames.written_table() or str(workdir / FRAMES_FILE)
+    summary = _summary(episode, staged, qa, frames)
     _publish(workdir, summary.dir_uri, summary)
     return summary
 
@@ -181,7 +183,10 @@ def _assess(
     )  # fmt: skip
 
 
-def _summary(episode: _Episode, features: tuple[StagedFeature, ...], qa: EpisodeQA) -> EpisodeSummary:
+def _summary(
+    episode: _Episode, features: tuple[StagedFeature, ...], qa: EpisodeQA, frames: pa.Table | str
+) -> EpisodeSummary:
+    """The staged episode's record; ``frames``: its frame table in hand, or its path to read back."""
     request, info, alignment = episode.request, episode.prepared.whole.info, episode.prepared.alignment
     ticks = alignment.ticks_ns
     return EpisodeSummary(
@@ -216,9 +221,7 @@ def _summary(episode: _Episode, features: tuple[StagedFeature, ...], qa: Episode
         bag_read={**episode.prepared.reader.transfer.to_dict(), "warnings": list(info.warnings)},
         clip_keys=episode.clip_keys,
         reused_clips={key: clip.episode_id for key, clip in episode.reused.items()},
-        data_bytes=episode_data_bytes(
-            str(episode.workdir / FRAMES_FILE), [f for f in features if f.video_info is None]
-        ),
+        data_bytes=episode_data_bytes(frames, [f for f in features if f.video_info is None]),
     )
 
 

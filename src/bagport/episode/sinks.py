@@ -65,6 +65,8 @@ class FrameTableWriter:
         self._values: dict[str, list[npt.NDArray[Any]]] = {key: [] for key in vector_dtypes}
         self._only_batch: dict[str, npt.NDArray[Any]] | None = None
         """The vectors written, while they are one batch (a short episode): stats need no read back."""
+        self._only_table: pa.Table | None = None
+        """The table written, while it is one batch: the data-file size needs no read back either."""
         self._batches = 0
         self.frames = 0
 
@@ -96,7 +98,9 @@ class FrameTableWriter:
         if self._writer is None or self._schema is None:
             self._schema = batch.schema
             self._writer = pq.ParquetWriter(self._path, batch.schema, compression="snappy")
-        self._writer.write_table(batch.cast(self._schema))
+        batch = batch.cast(self._schema)
+        self._only_table = batch if self._batches == 1 else None
+        self._writer.write_table(batch)
         self._frame_index, self._task = [], []
         self._values = {key: [] for key in self._dtypes}
 
@@ -105,6 +109,10 @@ class FrameTableWriter:
         if self._writer is not None:
             self._writer.close()
             self._writer = None
+
+    def written_table(self) -> pa.Table | None:
+        """The closed table, when it was written in one batch (else ``None``: read it back)."""
+        return self._only_table if self._writer is None else None
 
     def written_vectors(self, keys: Sequence[str]) -> dict[str, npt.NDArray[np.float64]] | None:
         """Each of ``keys`` as the (rows, dims) float64 values the closed table holds, when they were

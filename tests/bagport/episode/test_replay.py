@@ -15,7 +15,7 @@ import pytest
 from bagport.bags import BagMessage, BagReader, open_bag
 from bagport.episode import convert_episode, replay, sinks
 from bagport.episode.replay import ReplayReader, replayable
-from bagport.staging import FRAMES_FILE, PROVENANCE_FILE, QA_FILE, STATS_FILE
+from bagport.staging import FRAMES_FILE, PROVENANCE_FILE, QA_FILE, STATS_FILE, read_summary
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import episode_request
 
@@ -117,9 +117,15 @@ def test_conversion_stages_the_same_episode_with_and_without_the_shortcuts(
     replayed = convert_episode(episode_request(bag, tmp_path / "a"))
     monkeypatch.setattr(replay, "REPLAY_MAX_BYTES", 0)  # every bag read twice, as before
     monkeypatch.setattr(sinks.FrameTableWriter, "written_vectors", lambda *_: None)  # the table read back
+    monkeypatch.setattr(sinks.FrameTableWriter, "written_table", lambda *_: None)
     read_twice = convert_episode(episode_request(bag, tmp_path / "b"))
     one, two = _staged(replayed.dir_uri), _staged(read_twice.dir_uri)
     assert one == two
+    sizes = [read_summary(outcome.dir_uri) for outcome in (replayed, read_twice)]
+    assert sizes[0] is not None and sizes[1] is not None
+    assert (
+        sizes[0].data_bytes == sizes[1].data_bytes and sizes[0].data_bytes
+    )  # the table in hand or read back
     assert not any(
         "fidelity" in name or name.endswith(".refs") for name in one["files"]
     )  # scratch not staged

@@ -8,7 +8,8 @@ worker gives the reduce, and whether the commit's memory stays flat with the num
   checksums, publish) for a 100- and a 2,000-episode write, in a fresh process: its peak RSS (VmHWM).
 - ``reduce``: the flow process's side of a reduce (issue 14): read the staged summaries, select the episodes
   (``bagport.selection.select_episodes``: every QA entry), open the write, the files written by a worker
-  process (as the flow's tasks are), then the commit with the QA entries (``meta/qa``: index, a detail page per
+  process (as on Dask or Ray; with the local process pool the flow writes them on its own threads, which
+  W4's flow-process peak includes), then the commit with the QA entries (``meta/qa``: index, a detail page per
   warned episode, and every W4 episode warns), for 100 and 2,000 episodes, in a fresh process: its peak RSS,
   and with ``--trace`` tracemalloc's figures (what is held after the selection, and the peak).
 - ``dask``: the reduce of W1 (8 x 30 s, three 640x480 cameras; staged once) on a local Dask cluster of

@@ -9,7 +9,7 @@ from pathlib import Path
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from bagport.dataset.meta import EPISODES_BATCH, EPISODES_GROUP_MAX, write_episode_files
+from bagport.dataset.episodes_files import EPISODES_BATCH, EPISODES_GROUP_MAX, write_episode_files
 
 
 def _tables(rows: int, per_table: int) -> list[pa.Table]:

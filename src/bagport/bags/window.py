@@ -3,33 +3,27 @@
 from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
-from types import TracebackType
 
 import numpy as np
 
 from bagport.bags.message import BagMessage
 from bagport.bags.publish import Int64Array
 from bagport.bags.reader import BagReader
-from bagport.bags.records import BagInfo
-from bagport.bags.remote import TransferStats
+from bagport.bags.view import ReaderView
 
 __all__ = ["BagWindow"]
 
 
-class BagWindow:
+class BagWindow(ReaderView):
     """``BagReader`` over the messages of ``reader`` logged in ``[start_ns, end_ns]``.
 
     Closing the view leaves ``reader`` open: its owner closes it.
     """
 
     def __init__(self, reader: BagReader, start_ns: int, end_ns: int) -> None:
-        self._reader = reader
+        super().__init__(reader)
         self.start_ns = start_ns
         self.end_ns = end_ns
-
-    @property
-    def info(self) -> BagInfo:
-        return self._reader.info
 
     def messages(
         self, topics: Sequence[str] | None = None, *, start_ns: int | None = None, stop_ns: int | None = None
@@ -44,22 +38,3 @@ class BagWindow:
             inside = (log_ns >= self.start_ns) & (log_ns <= self.end_ns)
             out[topic] = (np.asarray(log_ns[inside]), np.asarray(publish_ns[inside]))
         return out
-
-    @property
-    def transfer(self) -> TransferStats:
-        return self._reader.transfer
-
-    @property
-    def undefined_types(self) -> dict[str, str]:
-        return self._reader.undefined_types
-
-    def close(self) -> None:
-        return None
-
-    def __enter__(self) -> BagWindow:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()

@@ -16,11 +16,9 @@ from __future__ import annotations
 
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from types import TracebackType
 
-from bagport.bags import BagInfo, BagMessage, BagReader
-from bagport.bags.publish import Int64Array
-from bagport.bags.remote import TransferStats
+from bagport.bags import BagMessage, BagReader
+from bagport.bags.view import ReaderView
 from bagport.msgtypes import global_topic
 
 __all__ = ["REPLAY_MAX_BYTES", "REPLAY_MAX_MESSAGES", "ReplayReader", "replayable"]
@@ -59,29 +57,17 @@ class _Read:
                 yield message
 
 
-class ReplayReader:
+class ReplayReader(ReaderView):
     """A :class:`~bagport.bags.BagReader` over an open bag (its owner closes it) that serves a read
     covered by an earlier complete read (the same or fewer topics, a window inside) from memory."""
 
     def __init__(
         self, reader: BagReader, max_bytes: int = REPLAY_MAX_BYTES, max_messages: int = REPLAY_MAX_MESSAGES
     ) -> None:
-        self._reader = reader
+        super().__init__(reader)
         self._bytes_left = max_bytes
         self._messages_left = max_messages
         self._reads: list[_Read] = []
-
-    @property
-    def info(self) -> BagInfo:
-        return self._reader.info
-
-    @property
-    def transfer(self) -> TransferStats:
-        return self._reader.transfer
-
-    @property
-    def undefined_types(self) -> dict[str, str]:
-        return self._reader.undefined_types
 
     @property
     def replays(self) -> int:
@@ -118,20 +104,9 @@ class ReplayReader:
             self._bytes_left, self._messages_left = self._bytes_left - size, self._messages_left - count
             self._reads.append(_Read(wanted, start_ns, stop_ns, kept))
 
-    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]:
-        return self._reader.publish_times_ns(topics)
-
     def close(self) -> None:
         """Forget the kept reads (the bag itself stays open: its owner closes it)."""
         self._reads.clear()
-
-    def __enter__(self) -> ReplayReader:
-        return self
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None:
-        self.close()
 
 
 def replayable(reader: BagReader) -> BagReader:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from typing import Any
 
@@ -177,7 +176,7 @@ class _Episodes:
     def submit_bags(self, requests: tuple[EpisodeRequest, ...]) -> None:
         """One episode per bag, in plan order, :func:`batch_size` bags to a task run."""
         self.progress.add(len(requests))
-        size = batch_size(len(requests), self._plan.config.workers or os.cpu_count() or 1)
+        size = batch_size(len(requests), self._plan.config.resolved_workers())
         for start in range(0, len(requests), size):
             self._submit([((i, 0), requests[i]) for i in range(start, min(start + size, len(requests)))])
 
@@ -320,7 +319,7 @@ def _cancel_ray(ref: Any) -> bool:
 
 def run_config(config: ConvertConfig) -> DatasetReport:
     """Run the conversion flow (or subflow, inside a deployment's flow) with the config's task runner."""
-    workers = config.workers or os.cpu_count() or 1
+    workers = config.resolved_workers()
     runner: TaskRunner[Any]
     if config.runner == "dask":
         runner = dask_runner(config, workers)

@@ -17,7 +17,6 @@ costs more than the writing itself, and a run with every episode staged has star
 
 from __future__ import annotations
 
-import os
 from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
@@ -92,7 +91,7 @@ def reduce_dataset(
             repaired=True,  # by plan_run, at the start of this run: recovery runs once per run
         ) as session:
             get_run_logger().info("writing %d output file(s)", len(session.plan.files))
-            with _file_writers(config.workers or os.cpu_count() or 1) as threads:
+            with _file_writers(config.resolved_workers()) as threads:
                 futures = _submit_writes(threads, session.plan, session.build)
                 wait(futures)
             for future in futures:

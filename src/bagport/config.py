@@ -5,6 +5,7 @@ deployments' ``config`` parameter all come from the fields below."""
 from __future__ import annotations
 
 import json
+import os
 from dataclasses import dataclass
 from typing import Annotated, Literal
 
@@ -205,3 +206,7 @@ class ConvertConfig(BaseModel):
 
     def resolved_staging(self) -> str:
         return self.staging or f"{self.output.rstrip('/')}.staging"
+
+    def resolved_workers(self) -> int:
+        """Parallel episodes: ``workers``, else this machine's CPU count."""
+        return self.workers or os.cpu_count() or 1

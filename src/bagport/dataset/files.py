@@ -91,28 +91,25 @@ class WrittenFile:
     videos: tuple[VideoPlacement, ...] = ()
 
 
+def _staged_size(summary: EpisodeSummary, rel: str) -> int:
+    """One staged file's size in bytes (one metadata request)."""
+    fs, path = url_to_fs(summary.file(rel))
+    return int(fs.size(path))
+
+
 def staged_clip_sizes(summaries: Sequence[EpisodeSummary], keys: Sequence[str]) -> dict[str, list[int]]:
     """Per camera: each episode's staged clip size in bytes (one metadata request per clip)."""
-    sizes: dict[str, list[int]] = {key: [] for key in keys}
-    for summary in summaries:
-        for key in keys:
-            fs, path = url_to_fs(summary.file(summary.videos[key]))
-            sizes[key].append(int(fs.size(path)))
-    return sizes
+    return {key: [_staged_size(summary, summary.videos[key]) for summary in summaries] for key in keys}
 
 
 def staged_data_sizes(summaries: Sequence[EpisodeSummary]) -> list[int]:
     """Each episode's row-group bytes in a data file, as its worker measured them; for an episode staged
     before bagport recorded them, its staged ``frames.parquet`` size (one metadata request: a rougher
     estimate, without the ``index`` column)."""
-    sizes: list[int] = []
-    for summary in summaries:
-        if summary.data_bytes is not None:
-            sizes.append(summary.data_bytes)
-            continue
-        fs, path = url_to_fs(summary.file(FRAMES_FILE))
-        sizes.append(int(fs.size(path)))
-    return sizes
+    return [
+        summary.data_bytes if summary.data_bytes is not None else _staged_size(summary, FRAMES_FILE)
+        for summary in summaries
+    ]
 
 
 def plan_files(

@@ -156,7 +156,8 @@ def _stage(episode: _Episode) -> EpisodeSummary:
     stats = sinks.stats([f.key for f in staged if f.video_info is None])
     stats.update({key: clip.stats for key, clip in episode.reused.items()})
     (workdir / STATS_FILE).write_text(json.dumps(stats))
-    frames = sinks.frames.written_table() or str(workdir / FRAMES_FILE)
+    in_hand = sinks.frames.written_table()
+    frames = in_hand if in_hand is not None else str(workdir / FRAMES_FILE)
     summary = _summary(episode, staged, qa, frames)
     _publish(workdir, summary.dir_uri, summary)
     return summary

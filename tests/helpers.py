@@ -9,6 +9,7 @@ from pydantic import JsonValue
 
 from bagport.episode import EpisodeRequest, episode_id_for
 from bagport.staging import EpisodeSummary
+from bagport.synth import CameraSpec
 from bagport.video.settings import EncoderSettings
 from tests.conftest import REALBAGS, REPO
 
@@ -17,6 +18,11 @@ FAST_CODEC: dict[str, JsonValue] = {"codec": "libx264", "crf": 18, "preset": "ul
 """Near-lossless and quick: for tests that check pixels exactly, not the default codec."""
 FAST_SETTINGS = EncoderSettings.from_dict(FAST_CODEC)
 """:data:`FAST_CODEC` as the settings a worker gets."""
+SMALL_CAMERAS = (
+    CameraSpec("front", "raw", "bgr8", height=48, width=64),
+    CameraSpec("wrist", "jpeg", height=48, width=64),
+)
+"""The sample contract's two cameras, small: a raw ``bgr8`` one and a JPEG one."""
 
 __all__ = [
     "FAST_CODEC",
@@ -24,6 +30,7 @@ __all__ = [
     "REALBAGS",
     "REPO",
     "SAMPLE_CONTRACT",
+    "SMALL_CAMERAS",
     "convert_in_process",
     "episode_request",
     "realbag",

@@ -15,20 +15,17 @@ from bagport.dataset.validate import validate_dataset
 from bagport.errors import DatasetWriteError, QualityError
 from bagport.reduce import finish_up_to_date, reduce_run
 from bagport.run import EpisodeFailure, PlannedEpisode, plan_run, stage_all
-from bagport.synth import CameraSpec, EpisodeSpec, Faults, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
+from bagport.synth import EpisodeSpec, Faults, write_episode_bag
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT, SMALL_CAMERAS
 
 
 @pytest.fixture(scope="module")
 def fleet(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Three bags: clean, NaN joints (fails QA), clean."""
     root = tmp_path_factory.mktemp("fleet")
-    spec = EpisodeSpec(duration_s=2.5, cameras=CAMERAS, mcap_crcs=True)  # checksummed: verdicts stay "pass"
+    spec = EpisodeSpec(
+        duration_s=2.5, cameras=SMALL_CAMERAS, mcap_crcs=True
+    )  # checksummed: verdicts stay "pass"
     for name, faults in (("a", Faults()), ("nan", Faults(joint_nan_at_s=1.0)), ("c", Faults())):
         write_episode_bag(root / name, "mcap", replace(spec, faults=faults))
     (root / "manifest.yaml").write_text("bags:\n  - uri: a\n  - uri: nan\n  - uri: c\n")
@@ -118,7 +115,7 @@ def test_a_broken_bag_arriving_alone_is_recorded_excluded_and_not_retried(tmp_pa
     """Finding 4 of issue 16: an append whose only new bag fails records the exclusion (the next
     scheduled run skips the unchanged bag) instead of failing with "no episode is left"."""
     bags = tmp_path / "bags"
-    write_episode_bag(bags / "good", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    write_episode_bag(bags / "good", "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS))
     out = tmp_path / "ds"
     options = {"bags_glob": str(bags / "*"), "contract": str(SAMPLE_CONTRACT), "output": str(out)}
     config = ConvertConfig(**options, encoder=FAST_CODEC, append=True)  # type: ignore[arg-type]
@@ -139,7 +136,7 @@ def test_a_broken_bag_arriving_alone_is_recorded_excluded_and_not_retried(tmp_pa
 def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Path) -> None:
     """Finding 6 of issue 16: the append was refused only after every bag had been converted."""
     bags = tmp_path / "bags"
-    write_episode_bag(bags / "first", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    write_episode_bag(bags / "first", "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS))
     out = tmp_path / "ds"
     config = ConvertConfig(
         bags_glob=str(bags / "*"),
@@ -150,7 +147,7 @@ def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Pa
     )
     plan = plan_run(config)
     reduce_run(plan, stage_all(plan))
-    write_episode_bag(bags / "second", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS))
+    write_episode_bag(bags / "second", "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS))
     text = SAMPLE_CONTRACT.read_text()
     start = text.index("  - key: observation.images.wrist")
     no_wrist = tmp_path / "no_wrist.yaml"
@@ -164,7 +161,9 @@ def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Pa
 def test_a_plan_is_up_to_date_only_when_the_dataset_is_what_it_would_write(tmp_path: Path) -> None:
     bags = tmp_path / "bags"
     for i in range(2):
-        write_episode_bag(bags / f"bag{i}", "mcap", EpisodeSpec(duration_s=0.5, seed=i, cameras=CAMERAS))
+        write_episode_bag(
+            bags / f"bag{i}", "mcap", EpisodeSpec(duration_s=0.5, seed=i, cameras=SMALL_CAMERAS)
+        )
     out = tmp_path / "ds"
     config = ConvertConfig(
         bags_glob=str(bags / "*"), contract=str(SAMPLE_CONTRACT), output=str(out),
@@ -204,7 +203,7 @@ def test_an_object_store_dataset_is_up_to_date_by_one_listing(tmp_path: Path, s3
     fs = S3FileSystem()
     fs.mkdir("uptodate")
     bags = tmp_path / "bags"
-    write_episode_bag(bags / "bag0", "mcap", EpisodeSpec(duration_s=0.5, cameras=CAMERAS))
+    write_episode_bag(bags / "bag0", "mcap", EpisodeSpec(duration_s=0.5, cameras=SMALL_CAMERAS))
     config = ConvertConfig(
         bags_glob=str(bags / "*"), contract=str(SAMPLE_CONTRACT), output="s3://uptodate/ds",
         staging=str(tmp_path / "staging"), encoder=FAST_CODEC, keep_staging=True,

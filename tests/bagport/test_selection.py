@@ -9,17 +9,12 @@ from pathlib import Path
 import pytest
 
 from bagport.dataset.qa import write_qa
-from bagport.episode import EpisodeRequest, convert_episode
+from bagport.episode import convert_episode
 from bagport.qa import CheckResult, EpisodeQA, QAEntry
 from bagport.selection import select_episodes
 from bagport.staging import QA_FILE, read_summary
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
+from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import SMALL_CAMERAS, episode_request
 
 
 @pytest.fixture(scope="module")
@@ -27,12 +22,8 @@ def staged(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A clean episode with two cameras, converted into a staging store."""
     tmp_path = tmp_path_factory.mktemp("selection")
     bag = tmp_path / "clean"
-    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=CAMERAS, mcap_crcs=True))
-    request = EpisodeRequest(
-        episode_id="ep0", bag_uri=str(bag), manifest_entry=0, staging_uri=str(tmp_path / "staging"),
-        contract_text=SAMPLE_CONTRACT.read_text(), contract_name="sample_robot.yaml", encoder=FAST_SETTINGS,
-    )  # fmt: skip
-    return Path(convert_episode(request).dir_uri)
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=SMALL_CAMERAS, mcap_crcs=True))
+    return Path(convert_episode(episode_request(bag, tmp_path / "staging")).dir_uri)
 
 
 def test_entries_hold_no_thumbnails_and_a_fleet_warning_still_shows_them(

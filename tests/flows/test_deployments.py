@@ -24,18 +24,12 @@ from prefect.utilities.templating import apply_values
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.dataset.validate import validate_dataset
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from bagport.synth import EpisodeSpec, write_episode_bag
 from flows.cli import build_parser
 from flows.cli_config import convert_config, load_encoder
 from flows.deployments import DeploymentConfig, ParameterNotSetError, ingest, reconvert
 from flows.runners import prefect_api
-from tests.helpers import FAST_CODEC, REPO, SAMPLE_CONTRACT
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
-
+from tests.helpers import FAST_CODEC, REPO, SAMPLE_CONTRACT, SMALL_CAMERAS
 
 ENV = {
     "BAGPORT_BAGS_GLOB": "s3://fleet/bags/*",
@@ -186,7 +180,7 @@ def test_deployment_parameters_are_placeholders_a_run_refuses_until_set(
 def test_scheduled_ingestion_appends_only_new_bags(tmp_path: Path) -> None:
     bags = tmp_path / "fleet"
     for name in ("day1_a", "day1_b"):
-        write_episode_bag(bags / name, "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS, task=name))
+        write_episode_bag(bags / name, "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS, task=name))
     out = tmp_path / "dataset"
     config = DeploymentConfig(
         bags_glob=str(bags / "day*"),
@@ -200,7 +194,7 @@ def test_scheduled_ingestion_appends_only_new_bags(tmp_path: Path) -> None:
         assert isinstance(first, DatasetReport)  # not a state: nothing excluded
         assert (first.episodes, first.tasks) == (2, ("day1_a", "day1_b"))
         write_episode_bag(
-            bags / "day2_a", "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS, task="day2_a")
+            bags / "day2_a", "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS, task="day2_a")
         )
         second = ingest(config)
         third = ingest(config)  # nothing new: nothing converted

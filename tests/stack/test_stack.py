@@ -42,17 +42,12 @@ from prefect.settings import PREFECT_API_URL, temporary_settings
 from s3fs import S3FileSystem
 
 from bagport.dataset.validate import validate_dataset
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import REPO, SAMPLE_CONTRACT
+from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import REPO, SAMPLE_CONTRACT, SMALL_CAMERAS
 
 pytestmark = pytest.mark.slow
 
 CHROMIUM = "/usr/bin/chromium"  # Debian's (scripts/setup_browser.sh): browsers cannot be downloaded here
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
 
 
 def _read_env(path: Path) -> dict[str, str]:
@@ -104,7 +99,7 @@ def stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict[str, str]]:
 
 def _upload_bag(fs: S3FileSystem, tmp: Path, name: str) -> None:
     local = tmp / "bags" / name
-    write_episode_bag(local, "mcap", EpisodeSpec(duration_s=1.0, cameras=CAMERAS, task=f"task {name}"))
+    write_episode_bag(local, "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS, task=f"task {name}"))
     fs.put(str(local), f"fleet/bags/{name}", recursive=True)
 
 

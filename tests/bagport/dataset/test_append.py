@@ -16,20 +16,15 @@ from bagport.dataset.validate import validate_dataset
 from bagport.errors import DatasetWriteError
 from bagport.reduce import reduce_run
 from bagport.run import plan_run, stage_all
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
-from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
+from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT, SMALL_CAMERAS
 
 
 @pytest.fixture(scope="module")
 def bags(tmp_path_factory: pytest.TempPathFactory) -> Path:
     root = tmp_path_factory.mktemp("bags")
     for i, name in enumerate(("a", "b", "c")):
-        spec = EpisodeSpec(duration_s=1.0 + 0.2 * i, seed=i, cameras=CAMERAS, task=f"task {name}")
+        spec = EpisodeSpec(duration_s=1.0 + 0.2 * i, seed=i, cameras=SMALL_CAMERAS, task=f"task {name}")
         write_episode_bag(root / name, "mcap", spec)
     return root
 

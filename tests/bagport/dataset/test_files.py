@@ -5,12 +5,19 @@ from __future__ import annotations
 
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from bagport.dataset import write_dataset
 from bagport.dataset.data_files import plan_data_files
-from bagport.dataset.files import plan_files, staged_clip_sizes, staged_data_sizes, write_planned_file
+from bagport.dataset.files import (
+    FilePlan,
+    plan_files,
+    staged_clip_sizes,
+    staged_data_sizes,
+    write_planned_file,
+)
 from bagport.dataset.meta import DatasetLimits
 from bagport.dataset.validate import validate_dataset
 from bagport.dataset.videos import plan_video_files
@@ -44,22 +51,28 @@ def test_data_files_group_by_lerobots_rule_on_planned_sizes() -> None:
     assert plan_data_files([], [], file_size_in_mb=1.0, chunks_size=10) == []
 
 
+def _plan(
+    staged: list[EpisodeSummary], tasks: list[str], limits: DatasetLimits | None = None, **start: Any
+) -> FilePlan:
+    """The plan of ``staged`` from their staged sizes (``start``: where a dataset continues)."""
+    keys = [f.key for f in staged[0].features if f.video_info is not None]
+    return plan_files(
+        staged,
+        staged[0].features,
+        tasks,
+        limits or DatasetLimits(),
+        staged_clip_sizes(staged, keys),
+        staged_data_sizes(staged),
+        **start,
+    )
+
+
 def test_the_worker_measures_the_row_group_bytes_a_data_file_holds(
     staged: list[EpisodeSummary], tmp_path: Path
 ) -> None:
     """The plan's estimate: each episode's row group encoded with indices from 0, within a few bytes of
     what it takes on disk at its final indices."""
-    keys = [f.key for f in staged[0].features if f.video_info is not None]
-    plan = plan_files(
-        staged,
-        staged[0].features,
-        ["a", "b"],
-        DatasetLimits(),
-        staged_clip_sizes(staged, keys),
-        staged_data_sizes(staged),
-        first_episode=3,
-        first_index=12_345,
-    )
+    plan = _plan(staged, ["a", "b"], first_episode=3, first_index=12_345)
     written = write_planned_file(plan, plan.files[0], str(tmp_path))
     path = tmp_path / written.files[0][0]
     raw = path.read_bytes()
@@ -83,9 +96,7 @@ def test_an_episode_staged_before_data_bytes_is_sized_by_its_frame_table(
 
 def test_the_plan_names_every_staged_input_once(staged: list[EpisodeSummary]) -> None:
     keys = [f.key for f in staged[0].features if f.video_info is not None]
-    sizes = staged_clip_sizes(staged, keys)
-    data = staged_data_sizes(staged)
-    plan = plan_files(staged, staged[0].features, ["a", "b"], DatasetLimits(), sizes, data, first_episode=7)
+    plan = _plan(staged, ["a", "b"], first_episode=7)
     assert [f.kind for f in plan.files] == ["data", *(["video"] * len(keys))]
     for key in keys:
         (item,) = [f for f in plan.files if f.key == key]
@@ -94,7 +105,7 @@ def test_the_plan_names_every_staged_input_once(staged: list[EpisodeSummary]) ->
     (item,) = [f for f in plan.files if f.kind == "data"]
     assert item.episodes == (0, 1) and item.inputs == tuple(s.file("frames.parquet") for s in staged)
     tiny = DatasetLimits(data_files_size_in_mb=1e-6, video_files_size_in_mb=1e-6)
-    split = plan_files(staged, staged[0].features, ["a"], tiny, sizes, data, first_index=10, next_data=(0, 3))
+    split = _plan(staged, ["a"], tiny, first_index=10, next_data=(0, 3))
     assert len(split.files) == 2 + 2 * len(keys)  # one episode per data file, one clip per video file
     assert [(f.name, f.episodes, f.first_index) for f in split.files if f.kind == "data"] == [
         ("data/chunk-000/file-003.parquet", (0,), 10),
@@ -103,16 +114,7 @@ def test_the_plan_names_every_staged_input_once(staged: list[EpisodeSummary]) ->
 
 
 def test_a_planned_file_reports_what_the_commit_needs(staged: list[EpisodeSummary], tmp_path: Path) -> None:
-    keys = [f.key for f in staged[0].features if f.video_info is not None]
-    plan = plan_files(
-        staged,
-        staged[0].features,
-        ["a", "b"],
-        DatasetLimits(),
-        staged_clip_sizes(staged, keys),
-        staged_data_sizes(staged),
-        first_index=100,
-    )
+    plan = _plan(staged, ["a", "b"], first_index=100)
     data = write_planned_file(plan, plan.files[0], str(tmp_path))
     assert [(p.from_index, p.to_index) for p in data.data] == [
         (100, 100 + staged[0].frames),

@@ -24,15 +24,11 @@ from bagport.columns import vector_column
 from bagport.episode import convert_episode
 from bagport.errors import BagportError
 from bagport.staging import EpisodeSummary
-from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from bagport.synth import EpisodeSpec, write_episode_bag
 from bagport.video import iter_frames
-from tests.helpers import REPO, SAMPLE_CONTRACT, episode_request
+from tests.helpers import REPO, SAMPLE_CONTRACT, SMALL_CAMERAS, episode_request
 
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
-SPEC = EpisodeSpec(duration_s=1.5, cameras=CAMERAS, mcap_crcs=True)
+SPEC = EpisodeSpec(duration_s=1.5, cameras=SMALL_CAMERAS, mcap_crcs=True)
 Offset = Callable[[bytes, Path], int]
 """Where to flip, from the data file's bytes and the bag folder."""
 

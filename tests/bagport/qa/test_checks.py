@@ -13,13 +13,9 @@ import pytest
 from bagport.episode import EpisodeRequest, convert_episode
 from bagport.episode.score import score_bag
 from bagport.qa import CheckResult, EpisodeQA, QAConfig
-from bagport.synth import CameraSpec, EpisodeSpec, Faults, Window, write_episode_bag
-from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
+from bagport.synth import EpisodeSpec, Faults, Window, write_episode_bag
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT, SMALL_CAMERAS
 
-SMALL_CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
 BASE = EpisodeSpec(duration_s=3.0, cameras=SMALL_CAMERAS, mcap_crcs=True)  # checksummed: no integrity warning
 
 

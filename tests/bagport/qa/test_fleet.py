@@ -18,16 +18,12 @@ from playwright.sync_api import Browser, Page, sync_playwright
 from bagport.dataset.qa import QA_INDEX_PATH, write_qa
 from bagport.episode import EpisodeRequest, convert_episode
 from bagport.qa import EpisodeQA, QAEntry
-from bagport.synth import CameraSpec, EpisodeSpec, Faults, Window, write_episode_bag
+from bagport.synth import EpisodeSpec, Faults, Window, write_episode_bag
 from bagport.synth.qa_entries import synth_qa_entries
-from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT, SMALL_CAMERAS
 
 pytestmark = pytest.mark.slow
 
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
 NAMES = {
     "observation.state": ("j1", "j2", "j3", "j4", "j5", "j6"),
     "action": ("j1", "j2", "j3", "j4", "j5", "j6"),
@@ -42,7 +38,7 @@ def _converted(tmp_path: Path) -> list[QAEntry]:
     ):
         bag = tmp_path / "fleet" / f"nan-{index}"
         write_episode_bag(
-            bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=CAMERAS, faults=fault, mcap_crcs=True)
+            bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=SMALL_CAMERAS, faults=fault, mcap_crcs=True)
         )
         request = EpisodeRequest(
             episode_id=f"ep{index}", bag_uri=str(bag), manifest_entry=index, staging_uri=str(tmp_path / "staging"),

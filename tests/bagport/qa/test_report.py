@@ -15,13 +15,8 @@ from PIL import Image
 from bagport.episode import EpisodeRequest, convert_episode
 from bagport.qa import EpisodeQA, QAConfig, QAEntry
 from bagport.qa.report import render_report
-from bagport.synth import CameraSpec, EpisodeSpec, Faults, Window, write_episode_bag
-from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT
-
-CAMERAS = (
-    CameraSpec("front", "raw", "bgr8", height=48, width=64),
-    CameraSpec("wrist", "jpeg", height=48, width=64),
-)
+from bagport.synth import EpisodeSpec, Faults, Window, write_episode_bag
+from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT, SMALL_CAMERAS
 
 
 def _entries(tmp_path: Path) -> list[QAEntry]:
@@ -30,7 +25,7 @@ def _entries(tmp_path: Path) -> list[QAEntry]:
     for index, fault in enumerate(faults):
         bag = tmp_path / f"ep{index}"
         write_episode_bag(
-            bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=CAMERAS, faults=fault, mcap_crcs=True)
+            bag, "mcap", EpisodeSpec(duration_s=3.0, cameras=SMALL_CAMERAS, faults=fault, mcap_crcs=True)
         )
         request = EpisodeRequest(
             episode_id=f"ep{index}",

@@ -157,24 +157,28 @@ def measure_commit(staged: list[EpisodeSummary], out: Path, sizes: Sequence[int]
         summaries = _repeat(staged, count)
         with open_write(summaries, str(root)) as session:
             written = [write_planned_file(session.plan, item, session.build) for item in session.plan.files]
-            job = out / f"commit-{count}.pickle"
-            job.write_bytes(pickle.dumps((session, summaries, written)))
-            load = _load()
-            started = time.perf_counter()
-            child = subprocess.run(
-                [sys.executable, __file__, "--commit-child", str(job)],
-                capture_output=True,
-                text=True,
-                check=True,
+            rows.append(
+                {"episodes": count, **_in_child("--commit-child", (session, summaries, written), out)}
             )
-            wall = time.perf_counter() - started
-        rows.append(
-            {"episodes": count, "wall_s": wall, "load": load, **json.loads(child.stdout.splitlines()[-1])}
-        )
         print(f"commit of {count}: {rows[-1]}", flush=True)
         shutil.rmtree(root)
-        job.unlink()
     return rows
+
+
+def _in_child(flag: str, job: object, out: Path) -> dict[str, float]:
+    """Run ``job`` (pickled) in a fresh process of this script (``flag`` says which part); its wall time,
+    the load when it started, and the figures it prints last (a JSON object)."""
+    path = out / f"{flag.strip('-')}.pickle"
+    path.write_bytes(pickle.dumps(job))
+    load = _load()
+    started = time.perf_counter()
+    child = subprocess.run(
+        [sys.executable, __file__, flag, str(path)], capture_output=True, text=True, check=True
+    )
+    wall = time.perf_counter() - started
+    path.unlink()
+    figures: dict[str, float] = json.loads(child.stdout.splitlines()[-1])
+    return {"wall_s": wall, "load": load, **figures}
 
 
 def _reduce_on(client: Any, staged: list[EpisodeSummary], root: Path) -> tuple[float, int]:
@@ -237,22 +241,10 @@ def measure_reduce(
     for count in sizes:
         root = out / f"reduce-{count}"
         shutil.rmtree(root, ignore_errors=True)
-        job = out / f"reduce-{count}.pickle"
-        job.write_bytes(
-            pickle.dumps(([(s.dir_uri, s.bag_uri) for s in _repeat(staged, count)], str(root), trace))
-        )
-        load = _load()
-        started = time.perf_counter()
-        child = subprocess.run(
-            [sys.executable, __file__, "--reduce-child", str(job)], capture_output=True, text=True, check=True
-        )
-        wall = time.perf_counter() - started
-        rows.append(
-            {"episodes": count, "wall_s": wall, "load": load, **json.loads(child.stdout.splitlines()[-1])}
-        )
+        job = ([(s.dir_uri, s.bag_uri) for s in _repeat(staged, count)], str(root), trace)
+        rows.append({"episodes": count, **_in_child("--reduce-child", job, out)})
         print(f"reduce of {count}: {rows[-1]}", flush=True)
         shutil.rmtree(root)
-        job.unlink()
     return rows
 
 

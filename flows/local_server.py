@@ -5,7 +5,8 @@ Without a configured ``PREFECT_API_URL`` Prefect starts the same server itself (
 server module are imported in the parent (~4 s) and then the server boots (~5 s), one after
 the other. Launching the server process first, with nothing but the standard library, lets it
 boot while the CLI imports and plans. The command and environment mirror Prefect's own
-(``prefect.server.api.server.SubprocessASGIServer._run_uvicorn_command``).
+(``prefect.server.api.server.SubprocessASGIServer._run_uvicorn_command``); the app is Prefect's, with
+its SQLite transactions begun IMMEDIATE (:mod:`flows.local_server_app` says why).
 
 This module imports no Prefect code: ``flows.cli`` calls :func:`launch` before anything heavy.
 """
@@ -45,8 +46,7 @@ class LocalServer:
     """One ``uvicorn`` process serving Prefect's API on a free loopback port."""
 
     def __init__(self) -> None:
-        spec = importlib.util.find_spec("prefect")
-        if spec is None or spec.origin is None:
+        if importlib.util.find_spec("prefect") is None:
             raise RuntimeError("Prefect is not installed")
         self.port = _free_port()
         self.api_url = f"http://127.0.0.1:{self.port}/api"
@@ -63,8 +63,10 @@ class LocalServer:
         self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
             [
                 sys.executable, "-m", "uvicorn",
-                "--app-dir", str(Path(spec.origin).parent.parent),
-                "--factory", "prefect.server.api.server:create_app",
+                # Prefect's app on SQLite transactions begun IMMEDIATE (flows/local_server_app.py); the
+                # app dir is this package's parent, so a `flows` folder in the working directory is not it
+                "--app-dir", str(Path(__file__).resolve().parent.parent),
+                "--factory", "flows.local_server_app:create_app",
                 "--host", "127.0.0.1", "--port", str(self.port),
                 "--log-level", "error", "--lifespan", "on",
             ],

@@ -26,6 +26,8 @@ from pathlib import Path
 
 import yaml
 
+from bench.prefect_records import TABLES, count_records, prefect_database, records_added
+
 __all__ = ["TOUCHED", "fleet_table", "measure_fleet"]
 
 TOUCHED = 20
@@ -90,10 +92,13 @@ def measure_fleet(workload: Path, out_root: Path, episodes: int) -> dict[str, di
         ),
     }
     results: dict[str, dict[str, float]] = {}
+    database = prefect_database()
     for name, (command, count, fresh, baseline) in phases.items():
         if name.startswith("touched"):
             _touch(workload, TOUCHED)
+        before = count_records(database)
         measured = measure(command, Path(command[command.index("--output") + 1]), fresh=fresh)
+        measured.update(records_added(before, count_records(database)))
         measured["episodes"] = count
         measured["baseline"] = list(phases).index(baseline)
         results[name] = measured
@@ -108,8 +113,8 @@ def fleet_table(fleet: dict[str, dict[str, float]], description: str) -> str:
     lines = [
         f"**W4** ({description}; staging kept between runs)",
         "",
-        "| run | wall s | of its first run | CPU s | of first run | wall s / episode | CPU s / episode | flow process peak RSS MB | peak RSS MB (tree) |",
-        "|---|---|---|---|---|---|---|---|---|",
+        "| run | wall s | of its first run | CPU s | of first run | wall s / episode | CPU s / episode | flow process peak RSS MB | peak RSS MB (tree) | Prefect records written |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]  # fmt: skip
     for name, m in fleet.items():
         first = fleet[names[int(m["baseline"])]] if "baseline" in m else fleet.get("first", {})
@@ -117,6 +122,14 @@ def fleet_table(fleet: dict[str, dict[str, float]], description: str) -> str:
         lines.append(
             f"| {name} | {m['wall_s']:.1f} | {share['wall_s']} | {m['cpu_s']:.1f} | {share['cpu_s']} | "
             f"{m['wall_s'] / m['episodes']:.3f} | {m['cpu_s'] / m['episodes']:.3f} | {m['root_rss_mb']:.0f} | "
-            f"{m['peak_rss_mb']:.0f} |"
+            f"{m['peak_rss_mb']:.0f} | {_records(m)} |"
         )
     return "\n".join(lines)
+
+
+def _records(measured: dict[str, float]) -> str:
+    """The Prefect rows a run added (:mod:`bench.prefect_records`), e.g. ``1 flow runs, 7 task runs, ...``;
+    empty for results measured before they were counted."""
+    if f"prefect_{next(iter(TABLES))}" not in measured:
+        return ""
+    return ", ".join(f"{measured[f'prefect_{table}']:.0f} {what}" for table, what in TABLES.items())

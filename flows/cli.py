@@ -88,7 +88,7 @@ def _option_errors(err: pydantic.ValidationError) -> str:
 
 
 def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
-    """Convert. With ``throwaway_api`` (a temporary Prefect server, whose records end with the run), a
+    """Convert. With ``throwaway_api`` (a temporary Prefect server, which nobody watches after the run), a
     run whose dataset is up to date, or an append with nothing new, finishes here without Prefect:
     nothing to convert, write or record, so neither a flow run nor the server's boot is waited for."""
     import pydantic  # noqa: PLC0415

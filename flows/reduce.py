@@ -31,6 +31,7 @@ from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTa
 from bagport.dataset import DatasetReport
 from bagport.dataset.commit import commit_write
 from bagport.dataset.files import FilePlan, WrittenFile
+from bagport.dataset.free_memory import release_unused_memory
 from bagport.dataset.session import open_write
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import BagportError
@@ -94,6 +95,7 @@ def reduce_dataset(
             with _file_writers(config.resolved_workers()) as threads:
                 futures = _submit_writes(threads, session.plan, session.build)
                 wait(futures)
+            release_unused_memory()  # what the file writers (threads here, with the local pool) freed
             for future in futures:
                 if not future.state.is_completed():
                     return _failed(future.state, "writing an output file")

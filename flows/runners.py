@@ -14,14 +14,15 @@ from prefect.task_runners import TaskRunner
 
 from bagport.config import ConvertConfig
 from bagport.errors import BagportError
-from flows.local_server import ServerUnreachableError, check_reachable, take_launched
+from flows.local_server import LocalServer, ServerUnreachableError, check_reachable, take_launched
 
 __all__ = ["RayMissingError", "ServerDownError", "dask_runner", "prefect_api", "ray_runner"]
 
 
 @contextmanager
 def prefect_api() -> Iterator[None]:
-    """Use the configured Prefect API, else one temporary local server shared by every worker.
+    """Use the configured Prefect API, else one temporary local server shared by every worker
+    (:class:`flows.local_server.LocalServer`: Prefect's app on IMMEDIATE SQLite transactions).
 
     Without this, each process-pool worker would start a temporary server of its own
     (15-20 s each here), because Prefect does not pass its ephemeral server's URL on. The CLI
@@ -41,13 +42,12 @@ def prefect_api() -> Iterator[None]:
         _require_server(str(get_current_settings().api.url))
         yield
         return
-    from prefect.server.api.server import SubprocessASGIServer  # noqa: PLC0415 - only without a server
-
-    server = SubprocessASGIServer()
-    server.start(timeout=get_current_settings().server.ephemeral.startup_timeout_seconds)
+    # called as a library (not through the CLI): the same temporary server the CLI launches, started now
+    server = LocalServer()
     previous = os.environ.get("PREFECT_API_URL")
-    os.environ["PREFECT_API_URL"] = server.api_url
     try:
+        server.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
+        os.environ["PREFECT_API_URL"] = server.api_url
         with temporary_settings({PREFECT_API_URL: server.api_url}), _draining():
             yield
     finally:

@@ -17,11 +17,11 @@ import numpy as np
 import numpy.typing as npt
 from fsspec.core import url_to_fs
 
-from bagport.dataset.arrow_memory import release_arrow_memory
 from bagport.dataset.base import DatasetBase
 from bagport.dataset.crashpoints import reached
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.files import WrittenFile
+from bagport.dataset.free_memory import release_unused_memory
 from bagport.dataset.layout import INFO_PATH
 from bagport.dataset.meta import EpisodeStats, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
@@ -143,10 +143,10 @@ def _build_meta(
         check_same_features(base, info)
     meta = (session.features, plan.tasks, placed.data, placed.videos)
     sketches = write_meta(root, summaries, *meta, episode_stats(), info, sketches, base)
-    release_arrow_memory()
+    release_unused_memory()
     qa = add_fleet_checks(qa, steps, sketches, session.features, qa_config, plan.fps)  # jumps vs the fleet
     write_provenance(root, summaries, placed.data, run_record, base, record=False)  # the record: last
-    release_arrow_memory()
+    release_unused_memory()
     entries, qa_report = finish_meta(
         root, session, summaries, qa, qa_config, base, robot_type, placed.digests, run_record
     )

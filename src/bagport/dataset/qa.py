@@ -27,7 +27,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 
-from bagport.dataset.arrow_memory import release_arrow_memory
+from bagport.dataset.free_memory import release_unused_memory
 from bagport.dataset.meta import EpisodeStats
 from bagport.dataset.sketches import DatasetSketches
 from bagport.qa import QABrief, QAConfig, QAEntry
@@ -203,13 +203,13 @@ def write_qa(
     Returns the report's path in the dataset."""
     fps = dataset.get("fps")
     _write_run_pages(root, entries, run_number, names, int(fps) if fps else None)
-    release_arrow_memory()
+    release_unused_memory()
     _migrate_legacy_summary(root, run_number, previous or str(root))
     index = index_table(entries, run_number, robot_type)
     index_path = root / QA_INDEX_PATH.format(run=run_number)
     index_path.parent.mkdir(parents=True, exist_ok=True)
     pq.write_table(index, index_path, compression="zstd")
-    release_arrow_memory()
+    release_unused_memory()
     whole = pa.concat_tables(_index_tables(root, previous, run_number, index))
     _write_summary(root, whole, config)
     (root / QA_REPORT_PATH).write_text(render_fleet_page(whole, dataset, run_number), encoding="utf-8")

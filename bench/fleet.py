@@ -96,9 +96,10 @@ def measure_fleet(workload: Path, out_root: Path, episodes: int) -> dict[str, di
     for name, (command, count, fresh, baseline) in phases.items():
         if name.startswith("touched"):
             _touch(workload, TOUCHED)
-        before = count_records(database)
+        before = count_records(database) if database is not None else None
         measured = measure(command, Path(command[command.index("--output") + 1]), fresh=fresh)
-        measured.update(records_added(before, count_records(database)))
+        if database is not None and before is not None:
+            measured.update(records_added(before, count_records(database)))
         measured["episodes"] = count
         measured["baseline"] = list(phases).index(baseline)
         results[name] = measured

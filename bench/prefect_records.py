@@ -25,8 +25,16 @@ TABLES = {
 """Tables counted, with what their rows are."""
 
 
-def prefect_database() -> Path:
-    """The SQLite database of Prefect's default connection URL."""
+def prefect_database() -> Path | None:
+    """The SQLite database bagport's temporary server writes to: Prefect's default under ``PREFECT_HOME``;
+    ``None`` when the runs go elsewhere (a configured API or database), so nothing is counted."""
+    elsewhere = (
+        "PREFECT_API_URL",
+        "PREFECT_API_DATABASE_CONNECTION_URL",
+        "PREFECT_SERVER_DATABASE_CONNECTION_URL",
+    )
+    if any(os.environ.get(name) for name in elsewhere):
+        return None
     home = os.environ.get("PREFECT_HOME") or str(Path.home() / ".prefect")
     return Path(home) / "prefect.db"
 
@@ -41,8 +49,10 @@ def count_records(database: Path) -> dict[str, int]:
         for table in TABLES:
             try:
                 counts[table] = int(connection.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
-            except sqlite3.OperationalError:  # not created yet
-                counts[table] = 0
+            except sqlite3.OperationalError as err:
+                if "no such table" not in str(err):
+                    raise
+                counts[table] = 0  # not created yet
         return counts
     finally:
         connection.close()

@@ -23,6 +23,7 @@ import time
 import tomllib
 import urllib.error
 import urllib.request
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -36,22 +37,25 @@ __all__ = [
 ]
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
-        sock.bind(("127.0.0.1", 0))
-        return int(sock.getsockname()[1])
-
-
 class LocalServer:
     """One ``uvicorn`` process serving Prefect's API on a free loopback port."""
 
-    def __init__(self) -> None:
+    def __init__(self, settings_env: Mapping[str, str] | None = None) -> None:
+        """``settings_env``: Prefect settings for the server beyond the environment (a library caller's
+        profile or ``temporary_settings``, as Prefect's own ``SubprocessASGIServer`` passes them)."""
         if importlib.util.find_spec("prefect") is None:
             raise RuntimeError("Prefect is not installed")
-        self.port = _free_port()
+        # the port is bound here and the socket handed to uvicorn (--fd): no other process can take it
+        # between choosing it and the server listening (a few seconds of imports), and a second run's
+        # health check can never reach this one's server
+        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        listener.bind(("127.0.0.1", 0))
+        listener.listen(128)
+        self.port = int(listener.getsockname()[1])
         self.api_url = f"http://127.0.0.1:{self.port}/api"
         env = {
             **os.environ,
+            **(settings_env or {}),
             "PREFECT_UI_ENABLED": "0",
             "PREFECT__SERVER_EPHEMERAL": "1",
             "PREFECT__SERVER_FINAL": "1",
@@ -60,18 +64,22 @@ class LocalServer:
             "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         }
         env.pop("PREFECT_API_URL", None)
-        self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
-            [
-                sys.executable, "-m", "uvicorn",
-                # Prefect's app on SQLite transactions begun IMMEDIATE (flows/local_server_app.py); the
-                # app dir is this package's parent, so a `flows` folder in the working directory is not it
-                "--app-dir", str(Path(__file__).resolve().parent.parent),
-                "--factory", "flows.local_server_app:create_app",
-                "--host", "127.0.0.1", "--port", str(self.port),
-                "--log-level", "error", "--lifespan", "on",
-            ],
-            env=env,
-        )  # fmt: skip
+        try:
+            self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
+                [
+                    sys.executable, "-m", "uvicorn",
+                    # Prefect's app on SQLite transactions begun IMMEDIATE (flows/local_server_app.py); the
+                    # app dir is this package's parent, so a `flows` folder in the working directory is not it
+                    "--app-dir", str(Path(__file__).resolve().parent.parent),
+                    "--factory", "flows.local_server_app:create_app",
+                    "--fd", str(listener.fileno()),
+                    "--log-level", "error", "--lifespan", "on",
+                ],
+                env=env,
+                pass_fds=(listener.fileno(),),
+            )  # fmt: skip
+        finally:
+            listener.close()  # the server process holds its own copy
         atexit.register(self.stop)  # also when the CLI fails before the flow starts
 
     def wait_ready(self, timeout_s: float) -> None:
@@ -106,6 +114,7 @@ class LocalServer:
             self._process.kill()
             self._process.wait()
         self._process = None
+        atexit.unregister(self.stop)
 
 
 _launched: LocalServer | None = None

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import socket
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -92,3 +93,20 @@ def test_the_temporary_server_sends_no_telemetry(
         local_server.take_launched()
         server.stop()
         monkeypatch.delenv("PREFECT_API_URL", raising=False)
+
+
+@pytest.mark.slow
+def test_the_port_is_held_from_the_start_and_the_callers_settings_reach_the_server(tmp_path: Path) -> None:
+    """The port is bound before the server process starts (no other process can take it during the
+    server's imports), and a library caller's Prefect settings are the server's too."""
+    server = LocalServer({"PREFECT_HOME": str(tmp_path / "caller-home")})
+    try:
+        with socket.socket() as other, pytest.raises(OSError):
+            other.bind(("127.0.0.1", server.port))  # before the server is even ready
+        server.wait_ready(120)
+        assert server._process is not None
+        environ = Path(f"/proc/{server._process.pid}/environ").read_bytes().split(b"\0")
+        assert f"PREFECT_HOME={tmp_path / 'caller-home'}".encode() in environ
+        assert (tmp_path / "caller-home" / "prefect.db").exists()  # its database is the caller's
+    finally:
+        server.stop()

@@ -4,7 +4,10 @@ client retry when two writers meet: flows/local_server_app.py)."""
 from __future__ import annotations
 
 import asyncio
+import os
 import sqlite3
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -66,3 +69,19 @@ def test_the_server_app_is_bagports_even_beside_a_flows_folder(
         server.wait_ready(120)
     finally:
         server.stop()
+
+
+def test_the_server_app_runs_on_the_immediate_configuration(tmp_path: Path) -> None:
+    """What uvicorn's factory call sets up (in a fresh process: the configuration is process-wide)."""
+    probe = (
+        "from flows.local_server_app import create_app\n"
+        "from prefect.server.database.dependencies import provide_database_interface\n"
+        "create_app()\n"
+        "print(type(provide_database_interface().database_config).__name__)\n"
+    )
+    env = {**os.environ, "PREFECT_HOME": str(tmp_path / "home")}
+    env.pop("PREFECT_API_DATABASE_CONNECTION_URL", None)
+    done = subprocess.run(
+        [sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True, timeout=120
+    )
+    assert done.stdout.split()[-1] == "ImmediateSqliteConfiguration"

@@ -8,23 +8,25 @@ import sys
 import pytest
 
 FRAGMENT_THEN_RELEASE = """
+import os
 import threading
 from pathlib import Path
 
 from bagport.dataset.free_memory import release_unused_memory
 
 def resident_mb():
-    return int(Path("/proc/self/statm").read_text().split()[1]) * 4096 / 2**20
+    return int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 kept = []
 
 def fragment():
     # 64 KB blocks (below glibc's mmap threshold: in the thread's arena), written so they are resident,
-    # each followed by a small block that stays, so the arena cannot shrink from its top when they go
+    # each followed by a 1 KB block that stays (above pymalloc's 512 bytes: from the same arena), so the
+    # arena cannot shrink from its top when the large ones go
     large = []
     for _ in range(800):
         large.append(b"x" * (64 * 1024))
-        kept.append(b"y" * 200)
+        kept.append(b"y" * 1024)
 
 thread = threading.Thread(target=fragment)
 thread.start()

@@ -44,9 +44,7 @@ def prefect_api() -> Iterator[None]:
         return
     # called as a library (not through the CLI): the same temporary server the CLI launches, started now
     # with the caller's Prefect settings (a profile, temporary_settings), as Prefect's own would be
-    settings_env = get_current_settings().to_environment_variables(exclude_unset=True)
-    settings_env.pop("PREFECT_API_URL", None)
-    server = LocalServer(settings_env)
+    server = LocalServer(get_current_settings().to_environment_variables(exclude_unset=True))
     previous = os.environ.get("PREFECT_API_URL")
     try:
         server.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)

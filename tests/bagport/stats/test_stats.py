@@ -7,6 +7,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from bagport.stats import (
+    QUANTILES,
     ImageStatsAccumulator,
     merge_feature_stats,
     merge_histograms,
@@ -26,6 +27,16 @@ def test_merged_moments_equal_pooled_moments(sizes: list[int], seed: int) -> Non
     np.testing.assert_array_equal(merged["min"], pooled.min(axis=0))
     np.testing.assert_array_equal(merged["max"], pooled.max(axis=0))
     assert merged["count"].tolist() == [sum(sizes)]
+
+
+@settings(max_examples=30, deadline=None)
+@given(frames=st.integers(1, 40), dims=st.integers(1, 5), seed=st.integers(0, 1000))
+def test_vector_quantiles_are_numpys_per_dimension(frames: int, dims: int, seed: int) -> None:
+    values = np.random.default_rng(seed).normal(size=(frames, dims))
+    stats = vector_stats(values)
+    for key, q in QUANTILES.items():
+        np.testing.assert_array_equal(stats[key], np.quantile(values, q, axis=0))
+    assert stats["q50"].shape == (dims,)
 
 
 def test_image_stats_are_per_channel_in_unit_range_and_exact() -> None:

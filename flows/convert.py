@@ -230,14 +230,19 @@ class _Episodes:
         )
 
 
-MAX_BATCH = 16
+MAX_BATCH = 32
 """At most this many episodes in one task run."""
+TASK_RUNS_PER_WORKER = 4
+"""At least this many task runs per worker, so the workers finish together (the last task runs are
+the pool's tail; a task run of 32 one-second bags takes about 3 s)."""
 
 
 def batch_size(episodes: int, workers: int) -> int:
-    """Episodes per task run: one while there are fewer than 16 per worker (every bag its own task run,
-    the pool balanced), then more, up to :data:`MAX_BATCH`, keeping at least 8 task runs per worker."""
-    return max(1, min(MAX_BATCH, episodes // (8 * workers)))
+    """Episodes per task run: one while there are fewer than 8 per worker (every bag its own task run,
+    the pool balanced), then more, up to :data:`MAX_BATCH`, keeping at least
+    :data:`TASK_RUNS_PER_WORKER` task runs per worker. Each task run costs Prefect about 0.1-0.2 s
+    of a worker (BENCHMARKS.md, W3)."""
+    return max(1, min(MAX_BATCH, episodes // (TASK_RUNS_PER_WORKER * workers)))
 
 
 def _submit_segment(plan: RunPlan, request: EpisodeRequest) -> PrefectFuture[Any]:

@@ -373,3 +373,17 @@ def test_a_cli_run_recovers_the_output_once(
     assert code == 0
     assert calls == [str(out)]
     assert (out / "meta" / "info.json").is_file()
+
+
+def test_batches_keep_every_worker_busy_to_the_end_and_stay_bounded() -> None:
+    batch_size = flows.convert.batch_size
+    assert batch_size(15, 2) == 1  # fewer than 8 bags per worker: each bag its own task run
+    assert batch_size(16, 2) == 2
+    assert batch_size(200, 2) == 25  # W3: 8 task runs, 4 per worker
+    assert batch_size(2000, 2) == flows.convert.MAX_BATCH == 32  # W4: 63 task runs
+    for episodes in range(1, 3000, 7):
+        for workers in (1, 2, 8):
+            size = batch_size(episodes, workers)
+            task_runs = -(-episodes // size)
+            assert 1 <= size <= flows.convert.MAX_BATCH
+            assert task_runs >= min(episodes, flows.convert.TASK_RUNS_PER_WORKER * workers)

@@ -7,6 +7,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
+from prefect.context import refresh_global_settings_context
 from prefect.events.worker import EventsWorker
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
@@ -33,10 +34,12 @@ def prefect_api() -> Iterator[None]:
     if launched is not None:
         try:
             launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
+            refresh_global_settings_context()  # Prefect imported before launch() set the URL (in-process CLI)
             with _draining():
                 yield
         finally:
             launched.stop()
+            refresh_global_settings_context()
         return
     if get_current_settings().api.url:
         _require_server(str(get_current_settings().api.url))
@@ -49,6 +52,11 @@ def prefect_api() -> Iterator[None]:
     try:
         server.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
         os.environ["PREFECT_API_URL"] = server.api_url
+        # threads Prefect starts outside any settings context (the process pool's message forwarder, which
+        # sends the workers' events) read Prefect's global settings, taken from the environment when Prefect
+        # was imported: without this they would start a temporary server of their own and send the
+        # workers' events there
+        refresh_global_settings_context()
         with temporary_settings({PREFECT_API_URL: server.api_url}), _draining():
             yield
     finally:
@@ -56,6 +64,7 @@ def prefect_api() -> Iterator[None]:
             os.environ.pop("PREFECT_API_URL", None)
         else:
             os.environ["PREFECT_API_URL"] = previous
+        refresh_global_settings_context()
         server.stop()
 
 

@@ -9,7 +9,7 @@ from prefect import flow, get_run_logger
 from prefect.client.schemas.objects import State
 from prefect.futures import PrefectFuture, as_completed
 from prefect.states import Failed
-from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, ThreadPoolTaskRunner
+from prefect.task_runners import TaskRunner, ThreadPoolTaskRunner
 
 from bagport.bags import source_stamp
 from bagport.config import ConvertConfig
@@ -22,10 +22,18 @@ from bagport.reduce import finish_up_to_date
 from bagport.request import EpisodeOutcome
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
+from flows import forkserver
 from flows.artifacts import Progress, publish_run_artifacts
 from flows.reduce import reduce_dataset
 from flows.run_story import completed_state
-from flows.runners import RayMissingError, ServerDownError, dask_runner, prefect_api, ray_runner
+from flows.runners import (
+    RayMissingError,
+    ServerDownError,
+    WarmProcessPoolTaskRunner,
+    dask_runner,
+    prefect_api,
+    ray_runner,
+)
 from tasks.episode import convert_batch_task, convert_episode_task
 from tasks.plan import plan_task
 from tasks.segment import segment_bag_task
@@ -331,7 +339,7 @@ def run_config(config: ConvertConfig) -> DatasetReport:
     elif config.runner == "ray":
         runner = ray_runner(config, workers)
     elif config.runner == "process" and workers > 1:
-        runner = ProcessPoolTaskRunner(max_workers=workers)
+        runner = WarmProcessPoolTaskRunner(max_workers=workers)
     else:
         runner = ThreadPoolTaskRunner(max_workers=workers)
     # Prefect types task_runner as TaskRunner[PrefectFuture]; every runner is, but not in its stubs.
@@ -370,6 +378,8 @@ def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetRe
     then run against the configured API (or one temporary local server) with that plan."""
     # bad manifests, contracts and outputs fail here, before Prefect starts
     _CHECKED[:] = [plan if plan is not None else plan_run(config)]
+    if config.runner == "process" and config.resolved_workers() > 1:
+        forkserver.start()  # the workers' imports run now, while the temporary Prefect server boots
     try:
         with prefect_api():
             return run_config(config)

@@ -2,22 +2,33 @@
 
 from __future__ import annotations
 
+import multiprocessing
 import os
-from collections.abc import Iterator
+import threading
+from collections.abc import Callable, Iterator, Mapping
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from contextlib import contextmanager
-from typing import Any
+from typing import Any, Self
 
 from prefect.context import refresh_global_settings_context
 from prefect.events.worker import EventsWorker
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
-from prefect.task_runners import TaskRunner
+from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, _initialize_process_pool_worker
 
 from bagport.config import ConvertConfig
 from bagport.errors import BagportError
+from flows import forkserver
 from flows.local_server import LocalServer, ServerUnreachableError, check_reachable, take_launched
 
-__all__ = ["RayMissingError", "ServerDownError", "dask_runner", "prefect_api", "ray_runner"]
+__all__ = [
+    "RayMissingError",
+    "ServerDownError",
+    "WarmProcessPoolTaskRunner",
+    "dask_runner",
+    "prefect_api",
+    "ray_runner",
+]
 
 
 @contextmanager
@@ -148,3 +159,64 @@ def ray_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
             init_kwargs={"address": "local", "num_cpus": workers, "num_gpus": 0, "include_dashboard": False}
         )
     return runner
+
+
+def _start_forked_worker(
+    environment: Mapping[str, str],
+    message_queue: Any,
+    initializer: Callable[..., None] | None,
+    initargs: tuple[Any, ...],
+) -> None:
+    """A forked worker's start: the flow process's environment (the forkserver has its own, from when it
+    started) and Prefect's global settings read from it, as a spawned worker has them; then Prefect's
+    own worker set-up (logs and events forwarded to the flow process)."""
+    os.environ.clear()
+    os.environ.update(environment)
+    refresh_global_settings_context()
+    _initialize_process_pool_worker(message_queue, initializer, initargs)
+
+
+class WarmProcessPoolTaskRunner(ProcessPoolTaskRunner):
+    """Prefect's process pool, its workers forked from bagport's warm forkserver (:mod:`flows.forkserver`:
+    Prefect, bagport and Prefect's collections imported once) instead of spawned.
+
+    Everything else is Prefect's: its worker set-up (logs and events forwarded to this process), message
+    forwarder, resolver threads, submission and shutdown. ``__enter__`` is Prefect 3.8's own with the
+    forkserver's context in place of ``spawn`` and the worker start above. ``tests/flows/test_runners.py``
+    runs a flow on it (workers forked warm, the flow's settings in their threads, their logs on the
+    server), so a Prefect upgrade that changes those internals fails there. Spawned, as Prefect's are,
+    where the platform has no forkserver, and when entered inside a pool worker (Prefect enters a copy
+    of the flow's runner in each worker that rebuilds the flow's context; it submits nothing there)."""
+
+    def __enter__(self) -> Self:
+        if multiprocessing.parent_process() is not None or not forkserver.start():
+            return super().__enter__()
+        TaskRunner.__enter__(self)
+        context = multiprocessing.get_context("forkserver")
+        self._subprocess_message_queue = context.Queue()
+        self._message_forwarding_thread = threading.Thread(
+            target=self._forward_subprocess_messages,
+            name="ProcessPoolTaskRunnerMessageForwarder",
+            daemon=True,
+        )
+        self._message_forwarding_thread.start()
+        try:
+            self._executor = ProcessPoolExecutor(
+                max_workers=self._max_workers,
+                mp_context=context,
+                initializer=_start_forked_worker,
+                initargs=(
+                    dict(os.environ),
+                    self._subprocess_message_queue,
+                    self._initializer,
+                    self._initargs,
+                ),
+            )
+            self._resolver_executor = ThreadPoolExecutor(max_workers=self._max_workers)
+        except Exception:
+            if self._executor is not None:
+                self._executor.shutdown(cancel_futures=True, wait=True)
+                self._executor = None
+            self._stop_message_forwarding()
+            raise
+        return self

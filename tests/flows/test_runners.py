@@ -1,22 +1,28 @@
-"""bagport's temporary Prefect server as a library caller gets it (``prefect_api()`` without the CLI):
-one server for the whole run, Prefect's own threads included."""
+"""Where a run's tasks run: bagport's temporary Prefect server as a library caller gets it
+(``prefect_api()`` without the CLI: one server for the whole run, Prefect's own threads included), and
+the local process pool's workers forked warm from the forkserver."""
 
 from __future__ import annotations
 
+import os
+import sys
 import threading
 import time
 from pathlib import Path
 from typing import Any
 
+import psutil
 import pytest
-from prefect import get_client
-from prefect.client.schemas.filters import FlowRunFilter, FlowRunFilterName
+from prefect import flow, get_client, get_run_logger, task
+from prefect.client.schemas.filters import FlowRunFilter, FlowRunFilterName, LogFilter, LogFilterFlowRunId
 from prefect.server.api.server import SubprocessASGIServer
+from prefect.settings import get_current_settings
 
 from bagport.config import ConvertConfig
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
+from flows import forkserver
 from flows.convert import run_config
-from flows.runners import prefect_api
+from flows.runners import WarmProcessPoolTaskRunner, prefect_api
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
 BAGS = ("a", "b", "c")
@@ -66,3 +72,46 @@ def test_a_library_run_on_the_process_pool_starts_no_other_server(
     # its own (about 2 s of a 12 s run here) and the workers' events went there
     assert started == []
     assert expected <= names
+
+
+@task(name="probe-worker")
+def _probe_worker() -> tuple[bool, str | None, int]:
+    """Whether this worker started warm (forked from the forkserver), the API URL a thread it starts sees
+    (threads start outside any settings context: Prefect's global settings), and how many processes it
+    started itself."""
+    get_run_logger().warning("hello from a pool worker")  # WARNING: scripts/env.sh sends no INFO to the API
+    seen: list[str | None] = []
+    thread = threading.Thread(target=lambda: seen.append(get_current_settings().api.url))
+    thread.start()
+    thread.join()
+    return "flows.worker_preload" in sys.modules, seen[0], len(psutil.Process().children())
+
+
+@flow(name="bagport-test-warm-pool")
+def _probe_flow() -> list[tuple[bool, str | None, int]]:
+    return [future.result() for future in [_probe_worker.submit() for _ in range(4)]]
+
+
+def test_pool_workers_fork_warm_with_the_flows_settings_and_their_logs_arrive(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    assert forkserver.start()  # before the API URL is set, as run_convert starts it
+    with prefect_api():
+        runner = WarmProcessPoolTaskRunner(max_workers=2)
+        state = _probe_flow.with_options(task_runner=runner)(return_state=True)  # type: ignore[arg-type]
+        # a worker: imports done in the forkserver; the flow process's API, not the forkserver's settings
+        # (which would have a thread start a server of its own); no process of its own (Prefect enters a
+        # copy of the flow's runner in each worker: it must not start a forkserver there)
+        assert state.result() == [(True, os.environ["PREFECT_API_URL"], 0)] * 4
+        flow_run_id = state.state_details.flow_run_id
+        assert flow_run_id is not None
+        deadline, said = time.monotonic() + 30, list[Any]()
+        while len(said) < 4 and time.monotonic() < deadline:
+            with get_client(sync_client=True) as client:
+                logs = client.read_logs(
+                    log_filter=LogFilter(flow_run_id=LogFilterFlowRunId(any_=[flow_run_id]))
+                )
+            said = [log for log in logs if log.message == "hello from a pool worker"]
+            time.sleep(0.5)
+    assert len(said) == 4  # each worker's log line reached the server

@@ -1,0 +1,28 @@
+"""What a process-pool worker needs before its first task, done once in the forkserver
+(:mod:`flows.forkserver`) so that every worker forked from it starts with it done: Prefect's task
+engine and runners, bagport's tasks (and through them the library), and Prefect's collections.
+
+Prefect loads every installed collection (the ``prefect.collections`` entry points) the first time a
+process turns a block's data into a block, which a worker does when it rebuilds the flow's context
+(its result storage); ``prefect-dask`` imports Dask's ``distributed`` then.
+"""
+
+from __future__ import annotations
+
+import prefect.task_engine
+import prefect.task_runners
+from prefect.plugins import load_prefect_collections
+
+import tasks.episode
+import tasks.segment
+
+__all__ = ["PRELOADED"]
+
+PRELOADED = (
+    prefect.task_engine,
+    prefect.task_runners,
+    tasks.episode,
+    tasks.segment,
+    load_prefect_collections(),
+)
+"""The modules (and collections) imported here; named so the imports are not unused."""

@@ -378,10 +378,13 @@ def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetRe
     then run against the configured API (or one temporary local server) with that plan."""
     # bad manifests, contracts and outputs fail here, before Prefect starts
     _CHECKED[:] = [plan if plan is not None else plan_run(config)]
-    if config.runner == "process" and config.resolved_workers() > 1:
+    warm = config.runner == "process" and config.resolved_workers() > 1
+    if warm:
         forkserver.start()  # the workers' imports run now, while the temporary Prefect server boots
     try:
         with prefect_api():
             return run_config(config)
     finally:
         _CHECKED.clear()
+        if warm:
+            forkserver.stop()

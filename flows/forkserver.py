@@ -16,7 +16,7 @@ from __future__ import annotations
 import multiprocessing
 import multiprocessing.forkserver
 
-__all__ = ["PRELOAD", "available", "start"]
+__all__ = ["PRELOAD", "available", "start", "stop"]
 
 PRELOAD = ("flows.worker_preload",)
 """What the forkserver imports before it forks a worker."""
@@ -35,3 +35,13 @@ def start() -> bool:
     multiprocessing.forkserver.set_forkserver_preload(list(PRELOAD))
     multiprocessing.forkserver.ensure_running()
     return True
+
+
+def stop() -> None:
+    """Stop the forkserver and wait for it (its workers have ended with the pool), as for any process a
+    run starts: nothing is left behind, and the run's CPU time includes the workers' (``bench/run.py``
+    counts the CPU of the processes the run waited for). Python has no public call for it; where its
+    private one is missing the forkserver ends with this process instead."""
+    stop_forkserver = getattr(getattr(multiprocessing.forkserver, "_forkserver", None), "_stop", None)
+    if stop_forkserver is not None:
+        stop_forkserver()

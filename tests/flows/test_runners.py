@@ -115,3 +115,10 @@ def test_pool_workers_fork_warm_with_the_flows_settings_and_their_logs_arrive(
             said = [log for log in logs if log.message == "hello from a pool worker"]
             time.sleep(0.5)
     assert len(said) == 4  # each worker's log line reached the server
+    assert _forkservers()
+    forkserver.stop()  # as run_convert does at its end: the forkserver is waited for, nothing left behind
+    assert not _forkservers()
+
+
+def _forkservers() -> list[psutil.Process]:
+    return [p for p in psutil.Process().children() if "forkserver" in " ".join(p.cmdline())]

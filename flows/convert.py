@@ -378,7 +378,8 @@ def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetRe
     then run against the configured API (or one temporary local server) with that plan."""
     # bad manifests, contracts and outputs fail here, before Prefect starts
     _CHECKED[:] = [plan if plan is not None else plan_run(config)]
-    warm = config.runner == "process" and config.resolved_workers() > 1
+    # with nothing to convert (every episode staged already) no worker starts: no forkserver either
+    warm = config.runner == "process" and config.resolved_workers() > 1 and bool(_CHECKED[0].requests)
     if warm:
         forkserver.start()  # the workers' imports run now, while the temporary Prefect server boots
     try:

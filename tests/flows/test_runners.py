@@ -75,35 +75,37 @@ def test_a_library_run_on_the_process_pool_starts_no_other_server(
 
 
 @task(name="probe-worker")
-def _probe_worker() -> tuple[bool, str | None, int]:
+def _probe_worker() -> tuple[bool, str | None, int, str]:
     """Whether this worker started warm (forked from the forkserver), the API URL a thread it starts sees
-    (threads start outside any settings context: Prefect's global settings), and how many processes it
-    started itself."""
+    (threads start outside any settings context: Prefect's global settings), how many processes it
+    started itself, and the first folder it imports from."""
     get_run_logger().warning("hello from a pool worker")  # WARNING: scripts/env.sh sends no INFO to the API
     seen: list[str | None] = []
     thread = threading.Thread(target=lambda: seen.append(get_current_settings().api.url))
     thread.start()
     thread.join()
-    return "flows.worker_preload" in sys.modules, seen[0], len(psutil.Process().children())
+    return "flows.worker_preload" in sys.modules, seen[0], len(psutil.Process().children()), sys.path[0]
 
 
 @flow(name="bagport-test-warm-pool")
-def _probe_flow() -> list[tuple[bool, str | None, int]]:
+def _probe_flow() -> list[tuple[bool, str | None, int, str]]:
     return [future.result() for future in [_probe_worker.submit() for _ in range(4)]]
 
 
 def test_pool_workers_fork_warm_with_the_flows_settings_and_their_logs_arrive(
-    monkeypatch: pytest.MonkeyPatch,
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     monkeypatch.delenv("PREFECT_API_URL", raising=False)
     assert forkserver.start()  # before the API URL is set, as run_convert starts it
+    monkeypatch.syspath_prepend(str(tmp_path))  # and before this folder is on the import path
     with prefect_api():
         runner = WarmProcessPoolTaskRunner(max_workers=2)
         state = _probe_flow.with_options(task_runner=runner)(return_state=True)  # type: ignore[arg-type]
         # a worker: imports done in the forkserver; the flow process's API, not the forkserver's settings
         # (which would have a thread start a server of its own); no process of its own (Prefect enters a
-        # copy of the flow's runner in each worker: it must not start a forkserver there)
-        assert state.result() == [(True, os.environ["PREFECT_API_URL"], 0)] * 4
+        # copy of the flow's runner in each worker: it must not start a forkserver there); the flow
+        # process's import path (multiprocessing sends it to each process it starts), as when spawned
+        assert state.result() == [(True, os.environ["PREFECT_API_URL"], 0, str(tmp_path))] * 4
         flow_run_id = state.state_details.flow_run_id
         assert flow_run_id is not None
         deadline, said = time.monotonic() + 30, list[Any]()

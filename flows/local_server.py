@@ -28,6 +28,7 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "LIFELINE_ENV",
     "LocalServer",
     "ServerUnreachableError",
     "api_configured",
@@ -35,6 +36,10 @@ __all__ = [
     "launch",
     "take_launched",
 ]
+
+
+LIFELINE_ENV = "BAGPORT_SERVER_LIFELINE_FD"
+"""The temporary server's end of a pipe whose other end only the process that started it holds."""
 
 
 class LocalServer:
@@ -64,6 +69,10 @@ class LocalServer:
             "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
         }
         env.pop("PREFECT_API_URL", None)
+        # the server's lifeline: it stops when this end closes, also when this process is killed
+        # (SIGKILL, the OOM killer) and stop() never runs (flows/local_server_app.py)
+        lifeline_r, self._lifeline_w = os.pipe()
+        env[LIFELINE_ENV] = str(lifeline_r)
         try:
             self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
                 [
@@ -76,10 +85,11 @@ class LocalServer:
                     "--log-level", "error", "--lifespan", "on",
                 ],
                 env=env,
-                pass_fds=(listener.fileno(),),
+                pass_fds=(listener.fileno(), lifeline_r),
             )  # fmt: skip
         finally:
-            listener.close()  # the server process holds its own copy
+            listener.close()  # the server process holds its own copies
+            os.close(lifeline_r)
         atexit.register(self.stop)  # also when the CLI fails before the flow starts
 
     def wait_ready(self, timeout_s: float) -> None:
@@ -114,6 +124,7 @@ class LocalServer:
             self._process.kill()
             self._process.wait()
         self._process = None
+        os.close(self._lifeline_w)
         atexit.unregister(self.stop)
 
 

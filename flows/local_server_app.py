@@ -19,6 +19,9 @@ This module runs in the server's process (``uvicorn --factory flows.local_server
 
 from __future__ import annotations
 
+import os
+import signal
+import threading
 from collections.abc import AsyncGenerator
 from contextlib import asynccontextmanager
 from typing import TYPE_CHECKING
@@ -27,6 +30,8 @@ from prefect.server.database.configurations import AioSqliteConfiguration
 from prefect.server.database.dependencies import set_database_config
 from prefect.server.utilities.database import get_dialect
 from prefect.settings import PREFECT_API_DATABASE_CONNECTION_URL
+
+from flows.local_server import LIFELINE_ENV
 
 if TYPE_CHECKING:
     from fastapi import FastAPI
@@ -49,9 +54,27 @@ class ImmediateSqliteConfiguration(AioSqliteConfiguration):
             yield transaction
 
 
+def _stop_when_orphaned() -> None:
+    """Stop this server (as ``LocalServer.stop`` would: SIGTERM) when the process that started it is
+    gone: it holds the only write end of the lifeline pipe, so a read returns at its end, also when that
+    process was killed and never stopped the server."""
+    lifeline = os.environ.get(LIFELINE_ENV)
+    if lifeline is None:
+        return
+
+    def watch() -> None:
+        while os.read(int(lifeline), 1):
+            pass
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    threading.Thread(target=watch, name="bagport-lifeline", daemon=True).start()
+
+
 def create_app() -> FastAPI:
     """Prefect's API app, on :class:`ImmediateSqliteConfiguration` when its database is SQLite."""
     from prefect.server.api.server import create_app as prefect_app  # noqa: PLC0415 - after the config
+
+    _stop_when_orphaned()
 
     connection_url = PREFECT_API_DATABASE_CONNECTION_URL.value()
     if get_dialect(connection_url).name == "sqlite":

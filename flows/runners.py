@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing
 import os
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor
 from contextlib import contextmanager
+from multiprocessing.connection import Connection
 from typing import Any, Self
 
 from prefect.context import refresh_global_settings_context
@@ -163,16 +165,26 @@ def ray_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
 
 def _start_forked_worker(
     environment: Mapping[str, str],
+    lifeline: Connection,
     message_queue: Any,
     initializer: Callable[..., None] | None,
     initargs: tuple[Any, ...],
 ) -> None:
     """A forked worker's start: the flow process's environment (the forkserver has its own, from when it
-    started) and Prefect's global settings read from it, as a spawned worker has them; then Prefect's
-    own worker set-up (logs and events forwarded to the flow process)."""
+    started) and Prefect's global settings read from it, as a spawned worker has them; a thread that ends
+    the worker when the flow process is gone (``lifeline``: its other end only the flow process holds;
+    a killed flow process would otherwise leave the workers waiting for work forever, and with them the
+    forkserver); then Prefect's own worker set-up (logs and events forwarded to the flow process)."""
     os.environ.clear()
     os.environ.update(environment)
     refresh_global_settings_context()
+
+    def watch() -> None:
+        with contextlib.suppress(EOFError, OSError):  # nothing is ever sent: it ends at the other end's close
+            lifeline.recv_bytes()
+        os._exit(70)  # EX_SOFTWARE: the flow process is gone, nothing waits for this worker's work
+
+    threading.Thread(target=watch, name="bagport-lifeline", daemon=True).start()
     _initialize_process_pool_worker(message_queue, initializer, initargs)
 
 
@@ -193,6 +205,7 @@ class WarmProcessPoolTaskRunner(ProcessPoolTaskRunner):
             return super().__enter__()
         TaskRunner.__enter__(self)
         context = multiprocessing.get_context("forkserver")
+        self._lifeline = context.Pipe(duplex=False)  # (read end for the workers, write end kept here)
         self._subprocess_message_queue = context.Queue()
         self._message_forwarding_thread = threading.Thread(
             target=self._forward_subprocess_messages,
@@ -207,6 +220,7 @@ class WarmProcessPoolTaskRunner(ProcessPoolTaskRunner):
                 initializer=_start_forked_worker,
                 initargs=(
                     dict(os.environ),
+                    self._lifeline[0],
                     self._subprocess_message_queue,
                     self._initializer,
                     self._initargs,
@@ -220,3 +234,10 @@ class WarmProcessPoolTaskRunner(ProcessPoolTaskRunner):
             self._stop_message_forwarding()
             raise
         return self
+
+    def __exit__(self, exc_type: Any, exc_value: Any, traceback: Any) -> None:
+        try:
+            super().__exit__(exc_type, exc_value, traceback)  # the workers have ended
+        finally:
+            for end in getattr(self, "_lifeline", ()):
+                end.close()

@@ -45,15 +45,15 @@ def count_records(database: Path) -> dict[str, int]:
         return dict.fromkeys(TABLES, 0)
     connection = sqlite3.connect(f"file:{database}?mode=ro", uri=True, timeout=30)
     try:
-        counts = {}
-        for table in TABLES:
-            try:
-                counts[table] = int(connection.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
-            except sqlite3.OperationalError as err:
-                if "no such table" not in str(err):
-                    raise
-                counts[table] = 0  # not created yet
-        return counts
+        present = {
+            row[0] for row in connection.execute("SELECT name FROM sqlite_master WHERE type = 'table'")
+        }
+        return {
+            table: int(connection.execute(f"SELECT count(*) FROM {table}").fetchone()[0])
+            if table in present
+            else 0
+            for table in TABLES  # a table not created yet: 0; any other error is raised
+        }
     finally:
         connection.close()
 

@@ -200,6 +200,9 @@ class WarmProcessPoolTaskRunner(ProcessPoolTaskRunner):
     where the platform has no forkserver, and when entered inside a pool worker (Prefect enters a copy
     of the flow's runner in each worker that rebuilds the flow's context; it submits nothing there)."""
 
+    _lifeline: tuple[Connection, Connection] | tuple[()] = ()
+    """The workers' lifeline (read end for them, write end kept here) while entered on the forkserver."""
+
     def __enter__(self) -> Self:
         if multiprocessing.parent_process() is not None or not forkserver.start():
             return super().__enter__()
@@ -232,6 +235,7 @@ class WarmProcessPoolTaskRunner(ProcessPoolTaskRunner):
                 self._executor.shutdown(cancel_futures=True, wait=True)
                 self._executor = None
             self._stop_message_forwarding()
+            self._close_lifeline()
             raise
         return self
 
@@ -239,5 +243,9 @@ class WarmProcessPoolTaskRunner(ProcessPoolTaskRunner):
         try:
             super().__exit__(exc_type, exc_value, traceback)  # the workers have ended
         finally:
-            for end in getattr(self, "_lifeline", ()):
-                end.close()
+            self._close_lifeline()
+
+    def _close_lifeline(self) -> None:
+        for end in self._lifeline:
+            end.close()
+        self._lifeline = ()

@@ -34,6 +34,7 @@ __all__ = [
     "api_configured",
     "check_reachable",
     "launch",
+    "loopback_listener",
     "take_launched",
 ]
 
@@ -50,12 +51,7 @@ class LocalServer:
         profile or ``temporary_settings``, as Prefect's own ``SubprocessASGIServer`` passes them)."""
         if importlib.util.find_spec("prefect") is None:
             raise RuntimeError("Prefect is not installed")
-        # the port is bound here and the socket handed to uvicorn (--fd): no other process can take it
-        # between choosing it and the server listening (a few seconds of imports), and a second run's
-        # health check can never reach this one's server
-        listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        listener.bind(("127.0.0.1", 0))
-        listener.listen(128)
+        listener = loopback_listener()
         self.port = int(listener.getsockname()[1])
         self.api_url = f"http://127.0.0.1:{self.port}/api"
         env = {
@@ -126,6 +122,23 @@ class LocalServer:
         self._process = None
         os.close(self._lifeline_w)
         atexit.unregister(self.stop)
+
+
+def loopback_listener() -> socket.socket:
+    """A listening TCP socket on a free loopback port, for the server to take over (``uvicorn --fd``).
+
+    The port is bound here: no other process can take it between choosing it and the server listening
+    (a few seconds of imports), and a second run's health check can never reach this one's server.
+    ``TCP_NODELAY`` is set here because uvicorn takes an inherited socket as ``AF_UNIX``, so asyncio
+    does not set it on the connections it accepts (it does for TCP sockets): Nagle's algorithm then
+    held each response split in two writes until the client's delayed ACK, about 40 ms per API call
+    (a task run makes several). Linux's accepted connections inherit the option from the listener.
+    """
+    listener = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    listener.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    listener.bind(("127.0.0.1", 0))
+    listener.listen(128)
+    return listener
 
 
 _launched: LocalServer | None = None

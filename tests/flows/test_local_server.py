@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import socket
 import urllib.error
@@ -108,5 +109,54 @@ def test_the_port_is_held_from_the_start_and_the_callers_settings_reach_the_serv
         environ = Path(f"/proc/{server._process.pid}/environ").read_bytes().split(b"\0")
         assert f"PREFECT_HOME={tmp_path / 'caller-home'}".encode() in environ
         assert (tmp_path / "caller-home" / "prefect.db").exists()  # its database is the caller's
+    finally:
+        server.stop()
+
+
+def test_the_listener_s_connections_send_without_delay() -> None:
+    """Accepted connections inherit ``TCP_NODELAY`` from the listener handed to the server: uvicorn takes
+    it as ``AF_UNIX`` and asyncio would not set the option (each API call then waited ~40 ms for the
+    client's delayed ACK)."""
+    with local_server.loopback_listener() as listener, socket.create_connection(listener.getsockname()):
+        accepted, _ = listener.accept()
+        with accepted:
+            assert accepted.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) != 0
+
+
+def _peer_socket_option(pid: int, peer: tuple[str, int]) -> int:
+    """``TCP_NODELAY`` of the socket in process ``pid`` connected to ``peer`` (``pidfd_getfd``)."""
+    import ctypes  # noqa: PLC0415 - Linux-only helper
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    pidfd = os.pidfd_open(pid)
+    try:
+        for entry in Path(f"/proc/{pid}/fd").iterdir():
+            target = libc.syscall(438, pidfd, int(entry.name), 0)  # SYS_pidfd_getfd (x86-64 and arm64)
+            if target < 0:
+                pytest.skip(f"pidfd_getfd is not allowed here (errno {ctypes.get_errno()})")
+            try:
+                sock = socket.socket(fileno=target)
+            except OSError:  # not a socket
+                os.close(target)
+                continue
+            with sock, contextlib.suppress(OSError):  # OSError: not connected (the listener)
+                if sock.family == socket.AF_INET and sock.getpeername() == peer:
+                    return sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY)
+    finally:
+        os.close(pidfd)
+    raise AssertionError(f"no socket of process {pid} is connected to {peer}")
+
+
+@pytest.mark.slow
+def test_the_servers_connections_send_without_delay() -> None:
+    """The running server's end of an API connection has ``TCP_NODELAY`` set."""
+    server = LocalServer()
+    try:
+        server.wait_ready(120)
+        assert server._process is not None
+        with socket.create_connection(("127.0.0.1", server.port)) as client:
+            client.sendall(b"GET /api/health HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n")
+            assert client.recv(4096).startswith(b"HTTP/1.1 200")
+            assert _peer_socket_option(server._process.pid, client.getsockname()) != 0
     finally:
         server.stop()

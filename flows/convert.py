@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import threading
 from collections.abc import Sequence
 from typing import Any
 
@@ -387,10 +388,15 @@ def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetRe
     warm = _on_local_pool(config) and bool(_CHECKED[0].requests)
     if warm:
         forkserver.start()  # the workers' imports run now, while the temporary Prefect server boots
+    stopping: threading.Thread | None = None
     try:
         with prefect_api():
-            return run_config(config)
+            try:
+                return run_config(config)
+            finally:
+                if warm:  # its workers ended with the flow's pool: it exits while the server stops
+                    stopping = forkserver.stop_in_background()
     finally:
         _CHECKED.clear()
-        if warm:
-            forkserver.stop()
+        if stopping is not None:
+            stopping.join()

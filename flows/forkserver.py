@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import multiprocessing
 import multiprocessing.forkserver
+import threading
 
-__all__ = ["PRELOAD", "available", "start", "stop"]
+__all__ = ["PRELOAD", "available", "start", "stop", "stop_in_background"]
 
 PRELOAD = ("flows.worker_preload",)
 """What the forkserver imports before it forks a worker."""
@@ -45,3 +46,11 @@ def stop() -> None:
     stop_forkserver = getattr(getattr(multiprocessing.forkserver, "_forkserver", None), "_stop", None)
     if stop_forkserver is not None:
         stop_forkserver()
+
+
+def stop_in_background() -> threading.Thread:
+    """:func:`stop` on a thread of its own, to join later: the forkserver's exit (a quarter of a second
+    of interpreter teardown) overlaps what the run still does, such as stopping its temporary server."""
+    stopping = threading.Thread(target=stop, name="bagport-forkserver-stop")
+    stopping.start()
+    return stopping

@@ -15,7 +15,12 @@ from typing import Any, Self
 from prefect.context import refresh_global_settings_context
 from prefect.events.worker import EventsWorker
 from prefect.logging.handlers import APILogWorker
-from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
+from prefect.settings import (
+    PREFECT_API_URL,
+    PREFECT_FLOWS_HEARTBEAT_FREQUENCY,
+    get_current_settings,
+    temporary_settings,
+)
 from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, _initialize_process_pool_worker
 
 from bagport.config import ConvertConfig
@@ -48,7 +53,7 @@ def prefect_api() -> Iterator[None]:
         try:
             launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
             refresh_global_settings_context()  # Prefect imported before launch() set the URL (in-process CLI)
-            with _draining():
+            with _on_temporary_server():
                 yield
         finally:
             launched.stop()
@@ -70,7 +75,7 @@ def prefect_api() -> Iterator[None]:
         # was imported: without this they would start a temporary server of their own and send the
         # workers' events there
         refresh_global_settings_context()
-        with temporary_settings({PREFECT_API_URL: server.api_url}), _draining():
+        with temporary_settings({PREFECT_API_URL: server.api_url}), _on_temporary_server():
             yield
     finally:
         if previous is None:
@@ -94,10 +99,18 @@ def _require_server(api_url: str) -> None:
 
 
 @contextmanager
-def _draining() -> Iterator[None]:
-    """Deliver queued logs and events while the server still listens."""
+def _on_temporary_server() -> Iterator[None]:
+    """A run on bagport's temporary server: no flow-run heartbeats, and queued logs and events delivered
+    while the server still listens.
+
+    Heartbeats let a server mark a flow run whose process died as crashed; the temporary server stops
+    with the run (it has a lifeline, ``flows/local_server.py``), so nothing could ever watch them. They
+    cost a run up to 1 s at its end: Prefect joins their thread, which sleeps in 1 s steps. A configured
+    server (``PREFECT_API_URL``, a deployment) keeps them.
+    """
     try:
-        yield
+        with temporary_settings({PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None}):
+            yield
     finally:
         APILogWorker.drain_all(timeout=10)
         EventsWorker.drain_all(timeout=10)

@@ -16,12 +16,13 @@ import pytest
 from prefect import flow, get_client, get_run_logger, task
 from prefect.client.schemas.filters import FlowRunFilter, FlowRunFilterName, LogFilter, LogFilterFlowRunId
 from prefect.server.api.server import SubprocessASGIServer
-from prefect.settings import get_current_settings
+from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
 
 from bagport.config import ConvertConfig
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows import forkserver
-from flows.convert import run_config
+from flows.convert import run_config, run_convert
+from flows.local_server import LocalServer
 from flows.runners import WarmProcessPoolTaskRunner, prefect_api
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -124,3 +125,44 @@ def test_pool_workers_fork_warm_with_the_flows_settings_and_their_logs_arrive(
 
 def _forkservers() -> list[psutil.Process]:
     return [p for p in psutil.Process().children() if "forkserver" in " ".join(p.cmdline())]
+
+
+@flow(name="bagport-test-heartbeats")
+def _heartbeat_seconds() -> int | None:
+    """The flow-run heartbeat interval Prefect's flow engine reads (``None``: no heartbeats)."""
+    return get_current_settings().flows.heartbeat_frequency
+
+
+def test_flow_runs_send_heartbeats_to_a_configured_server_only(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Nothing watches heartbeats on the temporary server, which stops with the run (and joining their
+    thread cost up to 1 s per run); a server the user configured keeps them, to mark dead runs crashed."""
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    default = get_current_settings().flows.heartbeat_frequency
+    assert default is not None
+    with prefect_api():
+        assert _heartbeat_seconds() is None
+    users = LocalServer()  # stands for the user's own server
+    try:
+        users.wait_ready(120)
+        monkeypatch.setenv("PREFECT_API_URL", users.api_url)
+        with temporary_settings({PREFECT_API_URL: users.api_url}), prefect_api():
+            assert _heartbeat_seconds() == default
+    finally:
+        users.stop()
+
+
+def test_a_run_on_the_warm_pool_leaves_no_forkserver(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """``run_convert`` stops the forkserver it started (on a thread, while the temporary server stops)
+    and waits for it before it returns."""
+    monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    for i, name in enumerate(BAGS[:2]):
+        write_episode_bag(tmp_path / name, "mcap", EpisodeSpec(duration_s=0.3, seed=i))
+    (tmp_path / "manifest.yaml").write_text("bags:\n" + "".join(f"  - uri: {n}\n" for n in BAGS[:2]))
+    config = ConvertConfig(
+        manifest=str(tmp_path / "manifest.yaml"), contract=str(SAMPLE_CONTRACT), output=str(tmp_path / "ds"),
+        encoder=FAST_CODEC, runner="process", workers=2,
+    )  # fmt: skip
+    assert not _forkservers()
+    assert run_convert(config).episodes == 2
+    assert not _forkservers()
+    assert not [t for t in threading.enumerate() if t.name == "bagport-forkserver-stop"]

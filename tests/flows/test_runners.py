@@ -15,6 +15,7 @@ import psutil
 import pytest
 from prefect import flow, get_client, get_run_logger, task
 from prefect.client.schemas.filters import FlowRunFilter, FlowRunFilterName, LogFilter, LogFilterFlowRunId
+from prefect.events.worker import EventsWorker
 from prefect.server.api.server import SubprocessASGIServer
 from prefect.settings import PREFECT_API_URL, get_current_settings, temporary_settings
 
@@ -147,6 +148,7 @@ def test_flow_runs_send_heartbeats_to_a_configured_server_only(monkeypatch: pyte
         monkeypatch.setenv("PREFECT_API_URL", users.api_url)
         with temporary_settings({PREFECT_API_URL: users.api_url}), prefect_api():
             assert _heartbeat_seconds() == default
+            EventsWorker.drain_all(timeout=30)  # its heartbeat event, sent before that server stops
     finally:
         users.stop()
 

@@ -21,9 +21,9 @@ from __future__ import annotations
 
 import os
 import signal
-import threading
 from collections.abc import AsyncGenerator
 from contextlib import asynccontextmanager
+from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING
 
 from prefect.server.database.configurations import AioSqliteConfiguration
@@ -31,6 +31,7 @@ from prefect.server.database.dependencies import set_database_config
 from prefect.server.utilities.database import get_dialect
 from prefect.settings import PREFECT_API_DATABASE_CONNECTION_URL
 
+from flows.lifeline import when_cut
 from flows.local_server import LIFELINE_ENV
 
 if TYPE_CHECKING:
@@ -56,18 +57,10 @@ class ImmediateSqliteConfiguration(AioSqliteConfiguration):
 
 def _stop_when_orphaned() -> None:
     """Stop this server (as ``LocalServer.stop`` would: SIGTERM) when the process that started it is
-    gone: it holds the only write end of the lifeline pipe, so a read returns at its end, also when that
-    process was killed and never stopped the server."""
+    gone, also when that process was killed and never stopped the server (:mod:`flows.lifeline`)."""
     lifeline = os.environ.get(LIFELINE_ENV)
-    if lifeline is None:
-        return
-
-    def watch() -> None:
-        while os.read(int(lifeline), 1):
-            pass
-        os.kill(os.getpid(), signal.SIGTERM)
-
-    threading.Thread(target=watch, name="bagport-lifeline", daemon=True).start()
+    if lifeline is not None:
+        when_cut(Connection(int(lifeline), writable=False), lambda: os.kill(os.getpid(), signal.SIGTERM))
 
 
 def create_app() -> FastAPI:

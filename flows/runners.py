@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import multiprocessing
 import os
 import threading
@@ -26,6 +25,7 @@ from prefect.task_runners import ProcessPoolTaskRunner, TaskRunner, _initialize_
 from bagport.config import ConvertConfig
 from bagport.errors import BagportError
 from flows import forkserver
+from flows.lifeline import when_cut
 from flows.local_server import LocalServer, ServerUnreachableError, check_reachable, take_launched
 
 __all__ = [
@@ -191,13 +191,8 @@ def _start_forked_worker(
     os.environ.clear()
     os.environ.update(environment)
     refresh_global_settings_context()
-
-    def watch() -> None:
-        with contextlib.suppress(EOFError, OSError):  # nothing is ever sent: it ends at the other end's close
-            lifeline.recv_bytes()
-        os._exit(70)  # EX_SOFTWARE: the flow process is gone, nothing waits for this worker's work
-
-    threading.Thread(target=watch, name="bagport-lifeline", daemon=True).start()
+    # EX_SOFTWARE: the flow process is gone, nothing waits for this worker's work
+    when_cut(lifeline, lambda: os._exit(70))
     _initialize_process_pool_worker(message_queue, initializer, initargs)
 
 

@@ -14,22 +14,34 @@ comment in ``AioSqliteConfiguration.setup_sqlite`` names (upstream: PrefectHQ/pr
 through Prefect's own injection point (``set_database_config``), for bagport's temporary server only;
 a server the user runs (``PREFECT_API_URL``, PostgreSQL in ``make stack``) is theirs and untouched.
 
+On a database that needs none of it, the server also skips the start-up work Prefect's lifespan does
+on every boot (:func:`settled`): ``alembic upgrade`` (importing alembic and reading every migration, to
+find nothing to do) and block-type registration (which imports every installed collection, Dask's
+``distributed`` with ``prefect-dask``, only to hash them and skip). About 0.5 s of the server's boot,
+which every run without ``PREFECT_API_URL`` waits for.
+
 This module runs in the server's process (``uvicorn --factory flows.local_server_app:create_app``).
 """
 
 from __future__ import annotations
 
 import os
+import re
 import signal
+import sqlite3
 from collections.abc import AsyncGenerator
-from contextlib import asynccontextmanager
+from contextlib import asynccontextmanager, closing
 from multiprocessing.connection import Connection
+from pathlib import Path
 from typing import TYPE_CHECKING
 
+import prefect.server.database
+from prefect.context import refresh_global_settings_context
 from prefect.server.database.configurations import AioSqliteConfiguration
 from prefect.server.database.dependencies import set_database_config
 from prefect.server.utilities.database import get_dialect
 from prefect.settings import PREFECT_API_DATABASE_CONNECTION_URL
+from sqlalchemy.engine import make_url
 
 from flows.lifeline import when_cut
 from flows.local_server import LIFELINE_ENV
@@ -38,7 +50,7 @@ if TYPE_CHECKING:
     from fastapi import FastAPI
     from sqlalchemy.ext.asyncio import AsyncSession, AsyncSessionTransaction
 
-__all__ = ["ImmediateSqliteConfiguration", "create_app"]
+__all__ = ["ImmediateSqliteConfiguration", "create_app", "settled"]
 
 
 class ImmediateSqliteConfiguration(AioSqliteConfiguration):
@@ -63,8 +75,56 @@ def _stop_when_orphaned() -> None:
         when_cut(Connection(int(lifeline), writable=False), lambda: os.kill(os.getpid(), signal.SIGTERM))
 
 
+SETTLED_SKIPS = {
+    "PREFECT_API_DATABASE_MIGRATE_ON_START": "false",
+    "PREFECT_API_BLOCKS_REGISTER_ON_START": "false",
+    # with memoizing on, Prefect imports every collection to hash the block registry before it skips
+    "PREFECT_MEMOIZE_BLOCK_AUTO_REGISTRATION": "false",
+}
+"""The settings that turn the lifespan's start-up work off, for a database :func:`settled` says needs none."""
+
+_REVISION_LINE = re.compile(r"^(revision|down_revision)\s*(?::[^=]*)?=\s*(.+)$", re.MULTILINE)
+
+
+def _head_revisions(versions_dir: Path) -> set[str]:
+    """The migrations no other migration follows: what ``alembic upgrade head`` would bring a database to.
+
+    Read from the migration files' ``revision``/``down_revision`` lines (a merge names several parents),
+    without importing alembic. Nothing found (a layout this code does not know) means no head.
+    """
+    revisions: set[str] = set()
+    parents: set[str] = set()
+    for script in versions_dir.glob("*.py"):
+        for name, value in _REVISION_LINE.findall(script.read_text(encoding="utf-8")):
+            ids = set(re.findall(r"[\"']([0-9A-Za-z_]+)[\"']", value))
+            (revisions if name == "revision" else parents).update(ids)
+    return revisions - parents
+
+
+def settled(connection_url: str) -> bool:
+    """Whether the SQLite database at ``connection_url`` is at this Prefect's newest migration and has its
+    block types registered (by an earlier boot), so a boot has nothing to create, migrate or register.
+
+    Anything else (no file yet, an older or newer schema, a database this cannot read) answers ``False``
+    and Prefect does its start-up work as it always does.
+    """
+    database = make_url(connection_url).database
+    if not database or database == ":memory:" or not Path(database).is_file():
+        return False
+    versions_dir = Path(prefect.server.database.__file__).parent / "_migrations" / "versions" / "sqlite"
+    heads = _head_revisions(versions_dir)
+    try:
+        with closing(sqlite3.connect(f"file:{database}?mode=ro", uri=True, timeout=5)) as db:
+            versions = {row[0] for row in db.execute("SELECT version_num FROM alembic_version")}
+            (block_types,) = db.execute("SELECT count(*) FROM block_type").fetchone()
+    except sqlite3.Error:
+        return False
+    return bool(heads) and versions == heads and block_types > 0
+
+
 def create_app() -> FastAPI:
-    """Prefect's API app, on :class:`ImmediateSqliteConfiguration` when its database is SQLite."""
+    """Prefect's API app, on :class:`ImmediateSqliteConfiguration` when its database is SQLite, without
+    the start-up work a :func:`settled` database does not need."""
     from prefect.server.api.server import create_app as prefect_app  # noqa: PLC0415 - after the config
 
     _stop_when_orphaned()
@@ -72,4 +132,7 @@ def create_app() -> FastAPI:
     connection_url = PREFECT_API_DATABASE_CONNECTION_URL.value()
     if get_dialect(connection_url).name == "sqlite":
         set_database_config(ImmediateSqliteConfiguration(connection_url=connection_url))
+        if settled(connection_url):
+            os.environ.update(SETTLED_SKIPS)  # this process is the server's own: nothing else reads them
+            refresh_global_settings_context()
     return prefect_app()

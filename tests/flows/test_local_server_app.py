@@ -1,10 +1,12 @@
 """The temporary server's SQLite transactions take the write lock at their start (no 503 and 2 s
-client retry when two writers meet: flows/local_server_app.py)."""
+client retry when two writers meet), and its boot skips the start-up work a settled database does not
+need (flows/local_server_app.py)."""
 
 from __future__ import annotations
 
 import asyncio
 import os
+import shutil
 import sqlite3
 import subprocess
 import sys
@@ -14,7 +16,7 @@ import pytest
 from prefect.server.database.configurations import AioSqliteConfiguration
 from sqlalchemy import text
 
-from flows.local_server_app import ImmediateSqliteConfiguration
+from flows.local_server_app import ImmediateSqliteConfiguration, _head_revisions, settled
 
 
 def _second_writer_waits(config_type: type[AioSqliteConfiguration], path: Path) -> bool:
@@ -85,3 +87,86 @@ def test_the_server_app_runs_on_the_immediate_configuration(tmp_path: Path) -> N
         [sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True, timeout=120
     )
     assert done.stdout.split()[-1] == "ImmediateSqliteConfiguration"
+
+
+_LIFESPAN_PROBE = """
+import asyncio, os, sys
+import prefect._internal.plugins.collections as collections
+from flows.local_server_app import create_app
+app = create_app()
+async def main():
+    async with app.router.lifespan_context(app):
+        print("alembic" in sys.modules, collections._collections is not None, flush=True)
+        os._exit(0)
+asyncio.run(main())
+"""
+
+
+def _boot(home: Path) -> tuple[bool, bool]:
+    """Start the server app's lifespan as uvicorn would (a fresh process on ``home``); whether it ran
+    alembic's migrations and whether it loaded Prefect's collections (block-type registration)."""
+    env = {
+        **os.environ,
+        "PREFECT_HOME": str(home),
+        "PREFECT__SERVER_EPHEMERAL": "1",
+        "PREFECT_UI_ENABLED": "0",
+    }
+    env.pop("PREFECT_API_DATABASE_CONNECTION_URL", None)
+    done = subprocess.run(
+        [sys.executable, "-c", _LIFESPAN_PROBE],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=180,
+    )
+    migrated, collections = done.stdout.split()[-2:]
+    return migrated == "True", collections == "True"
+
+
+def _url(database: Path) -> str:
+    return f"sqlite+aiosqlite:///{database}"
+
+
+@pytest.mark.slow
+def test_a_settled_database_boots_without_the_start_up_work(tmp_path: Path) -> None:
+    home = tmp_path / "home"
+    assert not settled(_url(home / "prefect.db"))  # no database yet
+    assert _boot(home) == (True, True)  # created: migrated, block types registered
+    assert settled(_url(home / "prefect.db"))
+    assert _boot(home) == (False, False)  # nothing to do, and nothing done
+
+    older = tmp_path / "older.db"
+    shutil.copy(home / "prefect.db", older)
+    with sqlite3.connect(older) as db:
+        db.execute("UPDATE alembic_version SET version_num = 'an_older_one'")
+    assert not settled(_url(older))  # Prefect migrates it as it always does
+    unregistered = tmp_path / "unregistered.db"
+    shutil.copy(home / "prefect.db", unregistered)
+    with sqlite3.connect(unregistered) as db:
+        db.execute("DELETE FROM block_schema")
+        db.execute("DELETE FROM block_type")
+    assert not settled(_url(unregistered))
+
+
+def test_a_database_that_is_not_prefects_is_not_settled(tmp_path: Path) -> None:
+    (tmp_path / "empty.db").touch()
+    sqlite3.connect(tmp_path / "other.db").execute("CREATE TABLE t (x)").connection.close()
+    assert not settled(_url(tmp_path / "empty.db"))
+    assert not settled(_url(tmp_path / "other.db"))
+    assert not settled("sqlite+aiosqlite:///:memory:")
+
+
+def test_the_head_is_the_migration_nothing_follows(tmp_path: Path) -> None:
+    scripts = {
+        "a": 'revision = "a1"\ndown_revision = None\n',
+        "b": 'revision = "b2"\ndown_revision = "a1"\n',
+        "c": "revision: str = 'c3'\ndown_revision: str = 'a1'\n",
+        "d": 'revision = "d4"\ndown_revision = ("b2", "c3")\n',  # a merge
+    }
+    for name, lines in scripts.items():
+        (tmp_path / f"{name}.py").write_text(f'"""{name}"""\n{lines}')
+    assert _head_revisions(tmp_path) == {"d4"}
+    (tmp_path / "d.py").unlink()
+    assert _head_revisions(tmp_path) == {"b2", "c3"}
+    assert _head_revisions(tmp_path / "nowhere") == set()

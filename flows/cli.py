@@ -91,12 +91,15 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     """Convert. With ``throwaway_api`` (a temporary Prefect server, which nobody watches after the run), a
     run whose dataset is up to date, or an append with nothing new, finishes here without Prefect:
     nothing to convert, write or record, so neither a flow run nor the server's boot is waited for."""
-    import pydantic  # noqa: PLC0415
+    from flows.import_gc import paused  # noqa: PLC0415 - standard library only
 
-    from bagport.dataset.history import dataset_report  # noqa: PLC0415
-    from bagport.qa import episode_ref  # noqa: PLC0415
-    from bagport.reduce import finish_up_to_date, summary_json  # noqa: PLC0415
-    from bagport.run import plan_run  # noqa: PLC0415
+    with paused():  # the heavy imports (flows/import_gc.py)
+        import pydantic  # noqa: PLC0415
+
+        from bagport.dataset.history import dataset_report  # noqa: PLC0415
+        from bagport.qa import episode_ref  # noqa: PLC0415
+        from bagport.reduce import finish_up_to_date, summary_json  # noqa: PLC0415
+        from bagport.run import plan_run  # noqa: PLC0415
 
     try:
         config = convert_config(args, vars(build_parser().parse_args(["convert"])))
@@ -140,8 +143,11 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
 
 
 def _run_flow(config: ConvertConfig, plan: RunPlan, show_bar: bool) -> DatasetReport:
-    from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
-    from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
+    from flows.import_gc import paused  # noqa: PLC0415 - standard library only
+
+    with paused():
+        from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
+        from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
 
     if show_bar:
         LISTENERS.append(_progress_bar)

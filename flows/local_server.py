@@ -27,6 +27,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from flows.import_gc import SERVER_PREAMBLE
+
 __all__ = [
     "LIFELINE_ENV",
     "LocalServer",
@@ -72,7 +74,8 @@ class LocalServer:
         try:
             self._process: subprocess.Popen[bytes] | None = subprocess.Popen(
                 [
-                    sys.executable, "-m", "uvicorn",
+                    # uvicorn's own command, with the collector paused through the app's imports (flows/import_gc.py)
+                    sys.executable, "-c", f"{SERVER_PREAMBLE}; from uvicorn.main import main; main()",
                     # Prefect's app on SQLite transactions begun IMMEDIATE (flows/local_server_app.py); the
                     # app dir is this package's parent, so a `flows` folder in the working directory is not it
                     "--app-dir", str(Path(__file__).resolve().parent.parent),

@@ -43,6 +43,7 @@ from prefect.server.utilities.database import get_dialect
 from prefect.settings import PREFECT_API_DATABASE_CONNECTION_URL
 from sqlalchemy.engine import make_url
 
+from flows.import_gc import resume
 from flows.lifeline import when_cut
 from flows.local_server import LIFELINE_ENV
 
@@ -135,4 +136,6 @@ def create_app() -> FastAPI:
         if settled(connection_url):
             os.environ.update(SETTLED_SKIPS)  # this process is the server's own: nothing else reads them
             refresh_global_settings_context()
-    return prefect_app()
+    app = prefect_app()
+    resume()  # the collector, paused by the server's command line through these imports (flows/import_gc.py)
+    return app

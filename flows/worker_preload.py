@@ -9,12 +9,17 @@ process turns a block's data into a block, which a worker does when it rebuilds 
 
 from __future__ import annotations
 
-import prefect.task_engine
-import prefect.task_runners
-from prefect.plugins import load_prefect_collections
+from flows.import_gc import paused
 
-import tasks.episode
-import tasks.segment
+with paused():  # frozen after: the forked workers' collections skip them (flows/import_gc.py)
+    import prefect.task_engine
+    import prefect.task_runners
+    from prefect.plugins import load_prefect_collections
+
+    import tasks.episode
+    import tasks.segment
+
+    _COLLECTIONS = load_prefect_collections()
 
 __all__ = ["PRELOADED"]
 
@@ -23,6 +28,6 @@ PRELOADED = (
     prefect.task_runners,
     tasks.episode,
     tasks.segment,
-    load_prefect_collections(),
+    _COLLECTIONS,
 )
 """The modules (and collections) imported here; named so the imports are not unused."""

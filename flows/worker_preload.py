@@ -1,6 +1,10 @@
 """What a process-pool worker needs before its first task, done once in the forkserver
 (:mod:`flows.forkserver`) so that every worker forked from it starts with it done: Prefect's task
-engine and runners, bagport's tasks (and through them the library), and Prefect's collections.
+engine and runners, bagport's tasks (and through them the library), the flow's own module, and
+Prefect's collections.
+
+A worker unpickles the flow with the flow run's context, which imports :mod:`flows.convert` (and with
+it the reduce's flow modules): 0.2 s in each worker before its first episode, when it was not here.
 
 Prefect loads every installed collection (the ``prefect.collections`` entry points) the first time a
 process turns a block's data into a block, which a worker does when it rebuilds the flow's context
@@ -16,6 +20,7 @@ with paused():  # frozen after: the forked workers' collections skip them (flows
     import prefect.task_runners
     from prefect.plugins import load_prefect_collections
 
+    import flows.convert
     import tasks.episode
     import tasks.segment
 
@@ -24,6 +29,7 @@ with paused():  # frozen after: the forked workers' collections skip them (flows
 __all__ = ["PRELOADED"]
 
 PRELOADED = (
+    flows.convert,
     prefect.task_engine,
     prefect.task_runners,
     tasks.episode,

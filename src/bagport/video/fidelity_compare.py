@@ -21,6 +21,11 @@ __all__ = ["FidelityParams", "FramePair", "FrameScores", "ReferenceFile", "compa
 
 _RED = np.array([255, 0, 0], np.uint8)
 
+SINGLE_THREAD_DECODE_PIXELS = 320 * 240
+"""Clips this small are checked with one decoder thread: for a W3 clip (128x96, 60 AV1 frames) starting
+dav1d's threads took more CPU than decoding (the whole clip: 5.4-6.4 ms of CPU threaded, 3.5-3.9 ms
+on one thread, also less wall time). Larger clips are decoded on the decoder's own threads."""
+
 
 class ReferenceFile:
     """The block-mean references of a clip, read one sample at a time from their file.
@@ -262,8 +267,11 @@ def _open(mp4_path: str | Path, grid: BlockGrid) -> Any:
         container.close()
         raise VideoError(f"{mp4_path}: no video stream to check")
     stream = container.streams.video[0]
-    stream.thread_type = "AUTO"
     ctx = stream.codec_context
+    if int(ctx.height) * int(ctx.width) <= SINGLE_THREAD_DECODE_PIXELS:
+        ctx.thread_count = 1  # the decoder's thread pool costs more than it brings (see the constant)
+    else:
+        stream.thread_type = "AUTO"
     if (int(ctx.height), int(ctx.width)) != (grid.height, grid.width):
         container.close()
         raise VideoError(

@@ -187,10 +187,14 @@ def _start_forked_worker(
     started) and Prefect's global settings read from it, as a spawned worker has them; a thread that ends
     the worker when the flow process is gone (``lifeline``: its other end only the flow process holds;
     a killed flow process would otherwise leave the workers waiting for work forever, and with them the
-    forkserver); then Prefect's own worker set-up (logs and events forwarded to the flow process)."""
-    os.environ.clear()
-    os.environ.update(environment)
-    refresh_global_settings_context()
+    forkserver); then Prefect's own worker set-up (logs and events forwarded to the flow process).
+
+    Prefect's settings are read again only when the environments differ: the forkserver started from the
+    flow process in the CLI, with this environment, and reading them costs a worker 0.1 s."""
+    if dict(os.environ) != dict(environment):
+        os.environ.clear()
+        os.environ.update(environment)
+        refresh_global_settings_context()
     # EX_SOFTWARE: the flow process is gone, nothing waits for this worker's work
     when_cut(lifeline, lambda: os._exit(70))
     _initialize_process_pool_worker(message_queue, initializer, initargs)

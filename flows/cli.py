@@ -72,9 +72,9 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     try:
         return _convert(args, throwaway_api=server is not None)
     finally:
-        unused = take_launched()  # the run failed before it needed the server
+        unused = take_launched()  # the run failed, or had nothing to do, before it needed the server
         if unused is not None:
-            unused.stop()
+            unused.stop(graceful=False)  # it served nothing: no waiting for its start-up to finish
 
 
 def _option_errors(err: pydantic.ValidationError) -> str:

@@ -111,12 +111,18 @@ class LocalServer:
             "or point PREFECT_API_URL at a running server"
         )
 
-    def stop(self) -> None:
+    def stop(self, *, graceful: bool = True) -> None:
+        """Stop the server and wait for it. ``graceful=False`` kills it at once: for a server nothing used,
+        where uvicorn's graceful stop, once it has started, first waits for the app's start-up to finish
+        (up to a second after a run that wrote much to its database). SQLite keeps its database whole."""
         if self._process is None:
             return
         if os.environ.get("PREFECT_API_URL") == self.api_url:
             del os.environ["PREFECT_API_URL"]
-        self._process.terminate()
+        if graceful:
+            self._process.terminate()
+        else:
+            self._process.kill()
         try:
             self._process.wait(timeout=10)
         except subprocess.TimeoutExpired:

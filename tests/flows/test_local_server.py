@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import socket
 import urllib.error
 import urllib.request
@@ -71,6 +72,21 @@ def test_the_server_answers_then_stops() -> None:
         server.stop()
     with pytest.raises(urllib.error.URLError):
         urllib.request.urlopen(f"{server.api_url}/health", timeout=2)
+
+
+@pytest.mark.parametrize("ready", [False, True])
+def test_an_unused_server_is_killed_at_once_and_nothing_is_left(ready: bool) -> None:
+    """While it imports and once it answers: killed, not asked to stop, and waited for."""
+    server = LocalServer()
+    process = server._process
+    assert process is not None
+    if ready:
+        server.wait_ready(120)
+    server.stop(graceful=False)
+    assert process.returncode == -signal.SIGKILL
+    assert server._process is None
+    with pytest.raises(ProcessLookupError):
+        os.kill(process.pid, 0)
 
 
 @pytest.mark.slow

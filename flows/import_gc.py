@@ -38,6 +38,7 @@ def paused() -> Iterator[None]:
     try:
         yield
     finally:
-        gc.freeze()
         if was_enabled:
-            gc.enable()
+            resume()
+        else:
+            gc.freeze()

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -33,6 +36,7 @@ __all__ = [
     "SMALL_CAMERAS",
     "convert_in_process",
     "episode_request",
+    "python_output",
     "realbag",
     "staged_episodes",
 ]
@@ -115,3 +119,15 @@ def staged_episodes(root: Path, durations_s: tuple[float, ...]) -> list[EpisodeS
         )
         summaries.append(convert_episode(episode_request(bag, root / "staging")))
     return summaries
+
+
+def python_output(code: str, prefect_home: Path, **env: str) -> list[str]:
+    """The words ``code`` prints in a fresh interpreter (process-wide state, such as Prefect's database
+    configuration or the garbage collector, starts clean) on its own Prefect home and database, with
+    ``env`` added to the environment; a failure raises with its output."""
+    environment = {**os.environ, "PREFECT_HOME": str(prefect_home), **env}
+    environment.pop("PREFECT_API_DATABASE_CONNECTION_URL", None)
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=environment, capture_output=True, text=True, check=True, timeout=180
+    )
+    return done.stdout.split()

@@ -5,11 +5,8 @@ need (flows/local_server_app.py)."""
 from __future__ import annotations
 
 import asyncio
-import os
 import shutil
 import sqlite3
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -17,6 +14,7 @@ from prefect.server.database.configurations import AioSqliteConfiguration
 from sqlalchemy import text
 
 from flows.local_server_app import ImmediateSqliteConfiguration, _head_revisions, settled
+from tests.helpers import python_output
 
 
 def _second_writer_waits(config_type: type[AioSqliteConfiguration], path: Path) -> bool:
@@ -81,12 +79,7 @@ def test_the_server_app_runs_on_the_immediate_configuration(tmp_path: Path) -> N
         "create_app()\n"
         "print(type(provide_database_interface().database_config).__name__)\n"
     )
-    env = {**os.environ, "PREFECT_HOME": str(tmp_path / "home")}
-    env.pop("PREFECT_API_DATABASE_CONNECTION_URL", None)
-    done = subprocess.run(
-        [sys.executable, "-c", probe], env=env, capture_output=True, text=True, check=True, timeout=120
-    )
-    assert done.stdout.split()[-1] == "ImmediateSqliteConfiguration"
+    assert python_output(probe, tmp_path / "home")[-1] == "ImmediateSqliteConfiguration"
 
 
 _LIFESPAN_PROBE = """
@@ -105,22 +98,8 @@ asyncio.run(main())
 def _boot(home: Path) -> tuple[bool, bool]:
     """Start the server app's lifespan as uvicorn would (a fresh process on ``home``); whether it ran
     alembic's migrations and whether it loaded Prefect's collections (block-type registration)."""
-    env = {
-        **os.environ,
-        "PREFECT_HOME": str(home),
-        "PREFECT__SERVER_EPHEMERAL": "1",
-        "PREFECT_UI_ENABLED": "0",
-    }
-    env.pop("PREFECT_API_DATABASE_CONNECTION_URL", None)
-    done = subprocess.run(
-        [sys.executable, "-c", _LIFESPAN_PROBE],
-        env=env,
-        capture_output=True,
-        text=True,
-        check=True,
-        timeout=180,
-    )
-    migrated, collections = done.stdout.split()[-2:]
+    words = python_output(_LIFESPAN_PROBE, home, PREFECT__SERVER_EPHEMERAL="1", PREFECT_UI_ENABLED="0")
+    migrated, collections = words[-2:]
     return migrated == "True", collections == "True"
 
 

@@ -94,3 +94,8 @@ class BagMessage:
     @property
     def raw_size(self) -> int:
         return len(self._raw)
+
+    @property
+    def cdr(self) -> bytes | memoryview | None:
+        """The serialised bytes of a ROS 2 message whose type starts with a Header, else ``None``."""
+        return self._raw if self._layout == HeaderLayout.CDR else None

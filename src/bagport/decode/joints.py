@@ -41,6 +41,8 @@ _DOF_FIELDS = {"position": "values", "value": "values", "value_dot": "values_dot
 _POINT_PREFIX = re.compile(r"^points\[(-?\d+)\]\.")
 _POINT_PATH = re.compile(r"^(?:(?:positions|velocities|accelerations|effort)\[-?\d+\]|time_from_start\.\w+)$")
 _STATE_INDEX = re.compile(r"^(?:position|velocity|effort)\[-?\d+\]$")
+_NAME_ORDERS = 16
+"""Name orders whose joint positions :class:`_ByName` keeps (beyond, it starts over)."""
 
 
 class _JointSelector(NamedTuple):
@@ -78,10 +80,18 @@ class _ByName:
             group: [i for i, s in enumerate(selectors) if (s.point, s.field) == group]
             for group in self._groups
         }
-        self._cache_key: tuple[str, ...] | None = None
-        self._index: dict[tuple[int, str], npt.NDArray[np.intp]] = {}
+        self._indices: dict[tuple[str, ...], dict[tuple[int, str], npt.NDArray[np.intp]]] = {}
+        """Where each selected joint is, per name order seen (two publishers on one topic alternate)."""
 
-    def _build_index(self, names: tuple[str, ...]) -> None:
+    def _index_of(self, names: tuple[str, ...]) -> dict[tuple[int, str], npt.NDArray[np.intp]]:
+        index = self._indices.get(names)
+        if index is None:
+            if len(self._indices) >= _NAME_ORDERS:
+                self._indices.clear()
+            index = self._indices[names] = self._build_index(names)
+        return index
+
+    def _build_index(self, names: tuple[str, ...]) -> dict[tuple[int, str], npt.NDArray[np.intp]]:
         lookup = {name: i for i, name in enumerate(names)}
         missing = list(dict.fromkeys(s.joint for s in self._selectors if s.joint not in lookup))
         if missing:
@@ -91,16 +101,14 @@ class _ByName:
                 fix="fix selector.names in the contract to use joint names the robot publishes"
                 + ("; it publishes none: select by index, e.g. 'position[0]'." if not names else "."),
             )
-        self._index = {
+        return {
             group: np.array([lookup[self._selectors[i].joint] for i in slots], dtype=np.intp)
             for group, slots in self._slots.items()
         }
-        self._cache_key = names
 
     def __call__(self, msg: Any) -> Vector:
         names = self._names_of(msg)
-        if names != self._cache_key:
-            self._build_index(names)
+        index = self._index_of(names)
         out = np.empty(len(self._selectors), dtype=np.float64)
         for group in self._groups:
             point, field = group
@@ -111,7 +119,7 @@ class _ByName:
                     topic=self._topic,
                     fix=f"select only fields the robot fills (e.g. position.<joint>), not the {field}.",
                 )
-            out[self._slots[group]] = values[self._index[group]]
+            out[self._slots[group]] = values[index[group]]
         return out
 
 

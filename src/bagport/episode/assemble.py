@@ -30,6 +30,7 @@ from bagport.decode import (
     make_extractor,
     resize_image,
 )
+from bagport.decode.joint_state_cdr import JointStateCdr, joint_state_reader
 from bagport.episode.alignment import AlignedSource
 from bagport.episode.video import VideoFeed
 from bagport.errors import AlignmentError, DecodeError
@@ -63,6 +64,8 @@ class _SourceStream:
         self.cache: dict[int, Any] = {}
         self.last_use: dict[int, int] = {}
         self.extractor: VectorExtractor | None = None
+        self.joint_states: JointStateCdr | None = None
+        """Reads further JointState messages from their bytes (:mod:`bagport.decode.joint_state_cdr`)."""
         self.quaternions: tuple[QuaternionGroup, ...] = ()
         """``x, y, z, w`` index groups of the extractor's names: slerped, not blended linearly."""
         self.video: VideoFeed | None = None
@@ -139,6 +142,11 @@ class _SourceStream:
 
 
 def _decode(source: _SourceStream, message: BagMessage) -> Any:
+    if source.joint_states is not None and source.extractor is not None:
+        cdr = message.cdr
+        arrays = source.joint_states.read(cdr) if cdr is not None else None
+        if arrays is not None:
+            return source.extractor(arrays)
     msg = message.msg()
     if source.source.kind is FeatureKind.VIDEO:
         image = decode_image(msg, source.src.msgtype)
@@ -149,6 +157,7 @@ def _decode(source: _SourceStream, message: BagMessage) -> Any:
     if source.extractor is None:
         source.extractor = make_extractor(source.src, msg)
         source.quaternions = quaternion_groups(source.extractor.names)
+        source.joint_states = joint_state_reader(source.src, source.extractor, message.cdr, msg)
     return source.extractor(msg)
 
 

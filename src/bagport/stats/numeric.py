@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+from PIL import Image as PILImage
 
 __all__ = ["QUANTILES", "STAT_KEYS", "FeatureStats", "ImageStatsAccumulator", "vector_stats"]
 
@@ -20,6 +21,9 @@ QUANTILES: dict[str, float] = {"q01": 0.01, "q10": 0.10, "q50": 0.50, "q90": 0.9
 STAT_KEYS = ("min", "max", "mean", "std", "count", *QUANTILES)
 
 FeatureStats = dict[str, npt.NDArray[Any]]
+
+_RGB = 3
+_BYTE_VALUES = 256
 
 
 def vector_stats(values: npt.NDArray[Any]) -> FeatureStats:
@@ -63,8 +67,13 @@ class ImageStatsAccumulator:
             sample = sample[:, :, None]
         if self._hist is None:
             self._hist = np.zeros((sample.shape[2], self._bins), dtype=np.int64)
-        for channel in range(sample.shape[2]):
-            self._hist[channel] += np.bincount(sample[:, :, channel].ravel(), minlength=self._bins)
+        if sample.dtype == np.uint8 and sample.shape[2] == _RGB and self._bins == _BYTE_VALUES:
+            # PIL counts the three channels in one pass, 1.5-3x faster than three bincounts
+            counts = PILImage.fromarray(np.ascontiguousarray(sample)).histogram()
+            self._hist += np.asarray(counts, dtype=np.int64).reshape(_RGB, _BYTE_VALUES)
+        else:
+            for channel in range(sample.shape[2]):
+                self._hist[channel] += np.bincount(sample[:, :, channel].ravel(), minlength=self._bins)
         self._frames += 1
 
     @property

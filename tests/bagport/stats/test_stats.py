@@ -71,3 +71,13 @@ def test_histogram_merge_is_exact_across_episodes() -> None:
     pixels = np.stack(all_frames).reshape(-1, 3) / 255.0
     np.testing.assert_allclose(merged["q90"].ravel(), np.quantile(pixels, 0.9, axis=0, method="inverted_cdf"))
     assert merged["count"].tolist() == [12]
+
+
+def test_a_subsampled_frame_counts_exactly_the_sampled_pixels() -> None:
+    """Frames larger than ``max_side`` are counted on every ``step``-th row and column (a strided view)."""
+    frame = np.random.default_rng(2).integers(0, 256, size=(481, 641, 3), dtype=np.uint8)
+    acc = ImageStatsAccumulator(max_side=150)
+    acc.update(frame)
+    sample = frame[::4, ::4]  # 641 // 150
+    expected = [np.bincount(sample[:, :, c].ravel(), minlength=256) for c in range(3)]
+    np.testing.assert_array_equal(acc.histogram(), np.stack(expected))

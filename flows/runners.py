@@ -52,7 +52,8 @@ def prefect_api() -> Iterator[None]:
     if launched is not None:
         try:
             launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
-            refresh_global_settings_context()  # Prefect imported before launch() set the URL (in-process CLI)
+            if str(get_current_settings().api.url or "") != launched.api_url:
+                refresh_global_settings_context()  # Prefect imported before launch() set the URL (in-process CLI)
             with _on_temporary_server():
                 yield
         finally:

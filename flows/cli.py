@@ -146,10 +146,6 @@ def _run_flow(config: ConvertConfig, plan: RunPlan, show_bar: bool) -> DatasetRe
     from flows.import_gc import paused  # noqa: PLC0415 - standard library only
 
     with paused():
-        # the reduce writes meta/tasks.parquet with pandas (bagport.dataset.tasks_file): imported now,
-        # while the temporary server boots, not on the reduce's single core at the end of the run
-        import pandas  # noqa: F401, PLC0415
-
         from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
         from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
 

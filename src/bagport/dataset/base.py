@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pandas as pd
 import pyarrow.parquet as pq
 from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
@@ -22,7 +23,6 @@ from fsspec.core import url_to_fs
 from bagport.dataset.checksums import latest_record
 from bagport.dataset.layout import HISTOGRAMS_PATH, INFO_PATH, STATS_PATH, TASKS_PATH, next_chunk_file
 from bagport.dataset.sketches import DatasetSketches, read_sketches
-from bagport.dataset.tasks_file import read_tasks_frame
 from bagport.errors import DatasetWriteError
 from bagport.stats import FeatureStats, stats_from_json
 
@@ -131,7 +131,7 @@ def read_base(root: str | Path) -> DatasetBase:
     histograms = {key: np.asarray(value, dtype=np.int64) for key, value in raw_histograms.items()}
     raw_stats = _read_json(fs, f"{path}/{STATS_PATH}")
     with fs.open(f"{path}/{TASKS_PATH}", "rb") as handle:
-        tasks_frame = read_tasks_frame(handle)
+        tasks_frame = pd.read_parquet(handle)
     tasks = [str(t) for t in tasks_frame.sort_values("task_index").index]
     chunks = int(info["chunks_size"])
     video_keys = [k for k, f in info["features"].items() if f.get("dtype") == "video"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import pandas as pd
 from fsspec.core import url_to_fs
 
 from bagport.dataset.base import read_base, record_string, record_tail
@@ -16,7 +17,6 @@ from bagport.dataset.layout import (
     RUN_RECORD_PATH,
     TASKS_PATH,
 )
-from bagport.dataset.tasks_file import read_tasks_frame
 from bagport.dataset.write import DatasetReport
 
 __all__ = ["converted_bags", "dataset_report", "record_exclusions", "recorded_write_key"]
@@ -43,7 +43,7 @@ def dataset_report(root: str) -> DatasetReport:
     fs, path = url_to_fs(root)
     with fs.open(f"{path.rstrip('/')}/{INFO_PATH}", "r", encoding="utf-8") as handle:
         info = json.load(handle)
-    tasks = read_tasks_frame(f"{root.rstrip('/')}/{TASKS_PATH}", fs.storage_options)
+    tasks = pd.read_parquet(f"{root.rstrip('/')}/{TASKS_PATH}", storage_options=fs.storage_options)
     videos = tuple(k for k, f in info["features"].items() if f.get("dtype") == "video")
     size = sum(int(fs.size(p)) for p in fs.find(path))
     frames = int(info["total_frames"])

@@ -11,11 +11,11 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
 from bagport.dataset.layout import CODEBASE_VERSION, DEFAULT_FEATURES, INFO_PATH, STATS_PATH, TASKS_PATH
-from bagport.dataset.tasks_file import read_tasks_frame
 from bagport.errors import ValidationError
 from bagport.stats import STAT_KEYS
 from bagport.video import probe_video
@@ -197,7 +197,7 @@ def check_invariants(root: Path) -> dict[str, Any]:
     tasks_path = root / TASKS_PATH
     if not tasks_path.is_file():
         raise _fail(tasks_path, "missing")
-    tasks = read_tasks_frame(tasks_path)
+    tasks = pd.read_parquet(tasks_path)
     if list(tasks["task_index"]) != list(range(len(tasks))) or len(tasks) != info["total_tasks"]:
         raise _fail(tasks_path, f"task_index must be 0..{info['total_tasks'] - 1}")
     episode_files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))

@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 import numpy.typing as npt
+import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
@@ -30,7 +31,6 @@ from bagport.dataset.layout import (
 )
 from bagport.dataset.sketches import DatasetSketches, sketches_from_data_files
 from bagport.dataset.stats_parts import StatsParts
-from bagport.dataset.tasks_file import write_tasks
 from bagport.dataset.videos import VideoPlacement
 from bagport.staging import FRAMES_FILE, STATS_FILE, EpisodeSummary, StagedFeature
 from bagport.stats import (
@@ -259,7 +259,10 @@ def write_meta(
     first_episode = base.episodes if base is not None else 0
     (root / "meta").mkdir(parents=True, exist_ok=True)
     (root / INFO_PATH).write_text(json.dumps(info, indent=4))
-    write_tasks(root / TASKS_PATH, tasks)
+    task_frame = pd.DataFrame(
+        {"task_index": np.arange(len(tasks), dtype=np.int64)}, index=pd.Index(tasks, name="task")
+    )
+    task_frame.to_parquet(root / TASKS_PATH)
 
     stat_keys = [f.key for f in features] + list(DEFAULT_FEATURES)
     tables = _episode_tables(summaries, data, videos, kept(episode_stats), stat_keys, first_episode, base)

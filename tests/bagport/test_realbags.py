@@ -72,8 +72,12 @@ def test_ros1_turtlesim_with_custom_types(tmp_path: Path) -> None:
     np.testing.assert_array_equal(state[episodes == 0], state[episodes == 1])
 
 
+RERUN = "rerun_humble_sensors/rosbag2_2025_09_10-13_03_56_0.mcap"
+ARRAYS = "rosbag2parquet/array_msgs"
+
+
 def test_humble_joint_states(tmp_path: Path) -> None:
-    bag = realbag("rerun_humble_sensors/rosbag2_2025_09_10-13_03_56_0.mcap")
+    bag = realbag(RERUN)
     manifest = tmp_path / "m.yaml"
     manifest.write_text(f"bags:\n  - uri: {bag}\n    task: wave\n")
     out = tmp_path / "rerun"
@@ -82,6 +86,26 @@ def test_humble_joint_states(tmp_path: Path) -> None:
     info = json.loads((out / "meta/info.json").read_text())
     assert info["total_frames"] == 15  # 1.5 s of 10 Hz joint states on a 10 fps grid
     assert len(info["features"]["observation.state"]["names"]) == 4
+
+
+@pytest.mark.parametrize("relative", [RERUN, ARRAYS])
+def test_joint_states_recorded_by_ros2_read_from_their_bytes_as_rosbags_reads_them(relative: str) -> None:
+    """The CDR that ROS 2's own serialiser wrote (``bagport.decode.joint_state_cdr``): every message."""
+    from rosbags.highlevel import AnyReader  # noqa: PLC0415
+
+    from bagport.decode.joint_state_cdr import JointStateCdr  # noqa: PLC0415
+
+    reader, read = JointStateCdr(), 0
+    with AnyReader([realbag(relative)]) as bag:
+        conns = [c for c in bag.connections if c.msgtype == "sensor_msgs/msg/JointState"]
+        for conn, _, raw in bag.messages(connections=conns):
+            msg: Any = bag.deserialize(raw, conn.msgtype)
+            arrays = reader.read(raw)
+            assert arrays is not None and arrays.name == tuple(msg.name)
+            for field in ("position", "velocity", "effort"):
+                assert getattr(arrays, field).tobytes() == np.asarray(getattr(msg, field)).tobytes()
+            read += 1
+    assert read >= 1
 
 
 def _held(stamps_ns: list[int], tick_ns: int) -> int:
@@ -235,8 +259,6 @@ def test_ros1_tf_lookup_matches_the_pose_it_was_broadcast_from(tmp_path: Path) -
     assert np.ptp(tf[:, 0]) > 1.0  # the turtle moves: not a constant
 
 
-RERUN = "rerun_humble_sensors/rosbag2_2025_09_10-13_03_56_0.mcap"
-ARRAYS = "rosbag2parquet/array_msgs"
 ARCHIVAL = yaml.safe_load((REPO / "configs/codecs/archival.yaml").read_text())
 """Near-lossless (H.264 yuv444p crf 0): decoded RGB is within 2 levels of what was encoded."""
 

@@ -31,7 +31,7 @@ def test_profile_reports_cpu_steps_and_counts(tmp_path: Path, capsys: pytest.Cap
     workload = Path(made.stdout.strip())
     main([str(workload), "--episodes", "1", "--top", "0"])
     out = capsys.readouterr().out
-    assert re.search(r"1 episodes: \d+\.\d+ CPU s", out)
+    assert re.search(r"1 episodes: \d+\.\d+ CPU s \(\d+\.\d+ on the main thread", out)
     assert re.search(r"\d+\.\d+ ms  pass 2: read, deserialise, decode JPEG", out)
     assert "contract parsed: 0 per episode" in out  # parsed once per process, by the warm-up episode
     assert "parquet tables read back: 0 per episode" in out  # a short episode's stats need no read back

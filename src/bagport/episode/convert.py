@@ -51,6 +51,7 @@ from bagport.staging import (
     staged_path,
     write_json,
 )
+from bagport.uris import is_local
 from bagport.video import ClipInfo, EncoderSettings
 
 __all__ = ["convert_episode"]
@@ -318,6 +319,7 @@ def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:
         fs.rm(path, recursive=True)
     fs.makedirs(path, exist_ok=True)
     made = {path.rstrip("/")}
+    local = is_local(fs)
     for item in sorted(workdir.rglob("*")):
         if item.is_file():
             remote = staged_path(path, item.relative_to(workdir).as_posix())
@@ -325,5 +327,16 @@ def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:
             if parent not in made:
                 fs.makedirs(parent, exist_ok=True)
                 made.add(parent)
-            fs.put_file(str(item), remote)
+            if not (local and _renamed(item, remote)):
+                fs.put_file(str(item), remote)
     write_json(staged_path(target, EPISODE_SUMMARY), summary.to_dict())
+
+
+def _renamed(source: Path, target: str) -> bool:
+    """``source`` renamed to ``target`` when both are on one local file system (the scratch folder and
+    the staging store on one disk: no copy); ``False`` when they are not, and it is copied instead."""
+    try:
+        source.replace(target)
+    except OSError:  # EXDEV: another file system
+        return False
+    return True

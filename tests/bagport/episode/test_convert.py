@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import errno
 import json
 import shutil
 from pathlib import Path
@@ -191,6 +192,27 @@ def test_rerun_reuses_finished_episodes_until_the_bag_changes(tmp_path: Path) ->
     changed = convert_episode(_request(bag, tmp_path / "staging"))
     assert changed.frames != first.frames
     assert changed.source_stamp != first.source_stamp
+
+
+def test_a_staging_store_on_another_file_system_gets_the_same_files_copied(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The finished files are renamed into a local staging store on the scratch folder's disk, and copied
+    (as to an object store) when it is on another one: the same staged episode either way."""
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5))
+    renamed = Path(convert_episode(_request(bag, tmp_path / "same-disk")).dir_uri)
+
+    def across_disks(self: Path, target: str | Path) -> Path:
+        raise OSError(errno.EXDEV, "Invalid cross-device link", str(self))
+
+    monkeypatch.setattr(Path, "replace", across_disks)
+    copied = Path(convert_episode(_request(bag, tmp_path / "other-disk")).dir_uri)
+    names = sorted(p.relative_to(renamed).as_posix() for p in renamed.rglob("*") if p.is_file())
+    assert names == sorted(p.relative_to(copied).as_posix() for p in copied.rglob("*") if p.is_file())
+    assert "videos/observation.images.front.mp4" in names
+    for name in ("frames.parquet", "provenance.parquet", "stats.json", "videos/observation.images.front.mp4"):
+        assert (renamed / name).read_bytes() == (copied / name).read_bytes(), name
 
 
 def test_a_short_read_against_the_index_is_an_error_not_a_short_dataset(tmp_path: Path) -> None:

@@ -1,9 +1,10 @@
 """``sensor_msgs/msg/JointState`` read straight from its little-endian CDR bytes.
 
 A robot's joint states are its busiest topic (hundreds of messages a second), and rosbags' generic
-deserialiser decodes every joint name of every message: about 60 us for 32 joints, most of a small
+deserialiser decodes every joint name of every message: about 25 us for 32 joints, most of a small
 episode's vector decoding. The names rarely change within a bag, so :class:`JointStateCdr` decodes them
-only when their bytes differ from the previous message's and reads the three arrays as numpy views.
+only when their bytes differ from each of the last name lists it saw, and reads the three arrays as
+numpy views: about 8 us.
 
 It reads exactly what rosbags reads (its ``deserialize_cdr``: the same alignment, string and sequence
 checks and size check), for the built-in JointState extractor only, and only once the first message
@@ -33,6 +34,7 @@ _ENCAPSULATION_BYTES = 4
 _MAX_SEQUENCE = 2**31
 """Longer sequences than rosbags accepts (its default ``max_sequence_length``) are left to rosbags."""
 _KNOWN_NAME_LISTS = 8
+"""Distinct name lists remembered per topic (one per publisher, usually)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,7 +52,7 @@ def _aligned(pos: int, alignment: int) -> int:
 
 
 class JointStateCdr:
-    """Reads one topic's JointState messages; remembers the last names and their bytes."""
+    """Reads one topic's JointState messages; remembers the last name lists and their bytes."""
 
     def __init__(self) -> None:
         self._known: list[tuple[bytes, tuple[str, ...]]] = []

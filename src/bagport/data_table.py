@@ -13,9 +13,8 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.compute as pc
 import pyarrow.parquet as pq
-from fsspec.core import url_to_fs
 
-from bagport.staging import StagedFeature
+from bagport.staging import StagedFeature, read_staged_table
 
 __all__ = [
     "PARQUET_MAGIC_BYTES",
@@ -57,12 +56,7 @@ def episode_table(
 ) -> pa.Table:
     """The episode's rows as a data file holds them, from its staged frame table (by URI, or the table in
     hand); ``task_index``: ``None`` numbers the episode's own tasks in the order they first appear."""
-    if isinstance(frames, pa.Table):
-        staged = frames
-    else:
-        fs, path = url_to_fs(frames)
-        with fs.open(path, "rb") as handle:
-            staged = pq.read_table(handle)
+    staged = frames if isinstance(frames, pa.Table) else read_staged_table(frames)
     rows = staged.num_rows
     tasks = [str(t) for t in staged.column("task").to_pylist()]
     numbers = task_index if task_index is not None else {t: i for i, t in enumerate(dict.fromkeys(tasks))}

@@ -20,6 +20,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import fsspec
+import pyarrow as pa
+import pyarrow.parquet as pq
 from fsspec.core import url_to_fs
 from pydantic import JsonValue
 
@@ -31,6 +33,7 @@ __all__ = [
     "EpisodeSummary",
     "StagedFeature",
     "episode_dir",
+    "read_staged_table",
     "read_summary",
     "staged_path",
     "write_json",
@@ -143,6 +146,18 @@ def write_json(uri: str, data: Any) -> None:
             json.dump(data, handle, indent=1, sort_keys=False)
     except ConnectionError as err:
         raise TransientError(f"{uri}: write failed ({err}); try again") from err
+
+
+def read_staged_table(uri: str) -> pa.Table:
+    """A staged Parquet file (an episode's frames or provenance), whole.
+
+    Read as one file (``ParquetFile``), not through ``pq.read_table``'s dataset layer: for an episode's
+    small file that layer is three quarters of the cost (1.0 against 0.24 ms), paid for every episode by
+    the reduce.
+    """
+    fs, path = url_to_fs(uri)
+    with fs.open(path, "rb") as handle:
+        return pq.ParquetFile(handle).read()
 
 
 def read_summary(dir_uri: str) -> EpisodeSummary | None:

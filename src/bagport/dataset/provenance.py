@@ -18,13 +18,12 @@ from typing import Any
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from fsspec.core import url_to_fs
 
 from bagport.dataset.base import DatasetBase
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.layout import APPEND_RUN_RECORD_PATH, PROVENANCE_PATH, RUN_RECORD_PATH
 from bagport.errors import DatasetWriteError
-from bagport.staging import PROVENANCE_FILE, EpisodeSummary, read_summary
+from bagport.staging import PROVENANCE_FILE, EpisodeSummary, read_staged_table, read_summary
 
 __all__ = ["episode_provenance", "run_record_path", "write_provenance", "write_run_record"]
 
@@ -115,9 +114,7 @@ it closes, so one row group per episode would grow the commit's memory with the 
 
 
 def _episode_rows(summary: EpisodeSummary, placement: DataPlacement, episode_index: int) -> pa.Table:
-    fs, staged = url_to_fs(summary.file(PROVENANCE_FILE))
-    with fs.open(staged, "rb") as handle:
-        table = pq.read_table(handle)
+    table = read_staged_table(summary.file(PROVENANCE_FILE))
     frame_index = table.column("frame_index").to_numpy()
     table = table.add_column(0, "index", pa.array(placement.from_index + frame_index.astype(np.int64)))
     return table.add_column(0, "episode_index", pa.array(np.full(table.num_rows, episode_index, np.int64)))

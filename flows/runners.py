@@ -51,10 +51,11 @@ def prefect_api() -> Iterator[None]:
     launched = take_launched()
     if launched is not None:
         try:
-            launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
             if str(get_current_settings().api.url or "") != launched.api_url:
                 refresh_global_settings_context()  # Prefect imported before launch() set the URL (in-process CLI)
+            # the run's settings are built while the server boots (0.06 s of pydantic-settings), not after
             with _on_temporary_server():
+                launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
                 yield
         finally:
             launched.stop()

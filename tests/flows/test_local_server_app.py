@@ -5,15 +5,25 @@ need (flows/local_server_app.py)."""
 from __future__ import annotations
 
 import asyncio
+import re
 import shutil
 import sqlite3
 from pathlib import Path
+from typing import Any
 
 import pytest
+from fastapi import APIRouter, FastAPI
 from prefect.server.database.configurations import AioSqliteConfiguration
 from sqlalchemy import text
+from starlette.routing import Mount
 
-from flows.local_server_app import ImmediateSqliteConfiguration, _head_revisions, settled
+from flows.local_server_app import (
+    HOT_PREFIXES,
+    ImmediateSqliteConfiguration,
+    _head_revisions,
+    hot_routers_first,
+    settled,
+)
 from tests.helpers import python_output
 
 
@@ -149,3 +159,87 @@ def test_the_head_is_the_migration_nothing_follows(tmp_path: Path) -> None:
     (tmp_path / "d.py").unlink()
     assert _head_revisions(tmp_path) == {"b2", "c3"}
     assert _head_revisions(tmp_path / "nowhere") == set()
+
+
+def _api_routes(app: FastAPI) -> list[Any]:
+    """The API app's route list (what :func:`hot_routers_first` reorders)."""
+    api = next(r for r in app.router.routes if isinstance(r, Mount) and r.path == "/api").app
+    routes: list[Any] = getattr(api, "router").routes  # noqa: B009 - a mounted app, typed as any ASGI app
+    return routes
+
+
+def _flat(routes: list[Any]) -> list[Any]:
+    """Every route in the order a request is matched against them (an included router's in its place)."""
+    flat: list[Any] = []
+    for route in routes:
+        router = getattr(route, "original_router", None)
+        flat.extend(router.routes if router is not None else [route])
+    return [r for r in flat if hasattr(r, "path_regex")]
+
+
+def _concrete(template: str) -> str:
+    """A request path for a route's template (its parameters filled in)."""
+    path = re.sub(r"\{[^}:]+:uuid\}", "6f3d1f2e-9a3b-4c1d-8e2f-0a1b2c3d4e5f", template)
+    path = re.sub(r"\{[^}:]+:path\}", "a/b", path)
+    return re.sub(r"\{[^}]+\}", "name", path)
+
+
+def _served_by(flat: list[Any], path: str, method: str) -> Any:
+    return next(
+        (r for r in flat if r.path_regex.match(path) and method in (getattr(r, "methods", None) or {method})),
+        None,
+    )
+
+
+def _requests(flat: list[Any]) -> list[tuple[str, str]]:
+    return [(_concrete(r.path), m) for r in flat for m in sorted(getattr(r, "methods", None) or {"GET"})]
+
+
+def test_prefects_hot_routers_go_first_and_serve_every_path_as_before(tmp_path: Path) -> None:
+    from prefect.server.api.server import create_app as prefect_app  # noqa: PLC0415 - the server's own
+
+    app = prefect_app(ephemeral=True)
+    routes = _api_routes(app)
+    before = list(routes)
+    moved = hot_routers_first(app)
+    assert sorted(moved) == sorted(HOT_PREFIXES)  # Prefect's routers keep these prefixes, none blocked
+    prefixes = [getattr(getattr(r, "original_router", None), "prefix", None) for r in routes]
+    routers = [p for p in prefixes if p is not None]
+    assert routers[: len(moved)] == [p for p in prefixes if p in moved]
+    assert [getattr(r, "path", None) for r in routes[:6]] == [getattr(r, "path", None) for r in before[:6]]
+    requests = _requests(_flat(before))
+    assert len(requests) > 150
+    for path, method in requests:
+        assert _served_by(_flat(routes), path, method) is _served_by(_flat(before), path, method), (
+            method,
+            path,
+        )
+
+
+def _app_with(*routers: APIRouter) -> FastAPI:
+    api = FastAPI()
+    for router in routers:
+        api.include_router(router)
+    app = FastAPI()
+    app.mount("/api", api)
+    return app
+
+
+def _router(prefix: str, *paths: str) -> APIRouter:
+    router = APIRouter(prefix=prefix)
+    for path in paths:
+        router.add_api_route(path, lambda: None, methods=["GET"])
+    return router
+
+
+def test_a_router_stays_behind_one_that_could_serve_its_paths() -> None:
+    blocking = _app_with(
+        _router("/deployments", "/x"), _router("", "/{anything}/version"), _router("/admin", "/version")
+    )
+    assert hot_routers_first(blocking) == []  # /{anything}/version would no longer see /admin/version
+    same_segment = _app_with(
+        _router("", "/flows/special"), _router("/flows", "/{name}"), _router("/logs", "/")
+    )
+    assert hot_routers_first(same_segment) == ["/logs"]  # /flows/{name} would take /flows/special
+    routers = [r.original_router.prefix for r in _api_routes(same_segment) if hasattr(r, "original_router")]
+    assert routers == ["/logs", "", "/flows"]

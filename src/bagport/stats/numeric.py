@@ -9,7 +9,7 @@ shape (1, 1, 1) in metres (LeRobot does not divide depth by 255), from a histogr
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
@@ -49,7 +49,14 @@ class ImageStatsAccumulator:
 
     Colour: RGB uint8 (H, W, 3), 256 bins. Depth: 12-bit codes (H, W) with ``bins=4096`` and
     ``levels`` = the depth each code decodes to (:meth:`bagport.video.depth.DepthQuantizer.levels`).
+
+    Colour frames (each subsampled to at most ``max_side`` pixels a side) are counted
+    :data:`RGB_BATCH_FRAMES` at a time: PIL counts a batch's three channels in one pass and its
+    counts become one array, where frame by frame the conversion of PIL's 768 counts cost more than
+    the counting (W3: 57 against 20 us a 96x128 frame). Memory stays flat: one batch of samples.
     """
+
+    RGB_BATCH_FRAMES = 32
 
     def __init__(
         self, max_side: int = 150, *, bins: int = 256, levels: npt.NDArray[np.float64] | None = None
@@ -59,6 +66,8 @@ class ImageStatsAccumulator:
         self.levels = levels
         self._hist: npt.NDArray[np.int64] | None = None
         self._frames = 0
+        self._batch: npt.NDArray[np.uint8] | None = None  # RGB samples not counted yet, stacked by rows
+        self._batched = 0
 
     def update(self, image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
         step = max(1, max(image.shape[0], image.shape[1]) // self._max_side)
@@ -68,13 +77,30 @@ class ImageStatsAccumulator:
         if self._hist is None:
             self._hist = np.zeros((sample.shape[2], self._bins), dtype=np.int64)
         if sample.dtype == np.uint8 and sample.shape[2] == _RGB and self._bins == _BYTE_VALUES:
-            # PIL counts the three channels in one pass, 1.5-3x faster than three bincounts
-            counts = PILImage.fromarray(np.ascontiguousarray(sample)).histogram()
-            self._hist += np.asarray(counts, dtype=np.int64).reshape(_RGB, _BYTE_VALUES)
+            self._add_rgb(cast("npt.NDArray[np.uint8]", sample))  # its dtype was just checked
         else:
             for channel in range(sample.shape[2]):
                 self._hist[channel] += np.bincount(sample[:, :, channel].ravel(), minlength=self._bins)
         self._frames += 1
+
+    def _add_rgb(self, sample: npt.NDArray[np.uint8]) -> None:
+        if self._batch is None or self._batch.shape[1:] != sample.shape:
+            self._count_batch()  # another frame size: what is held is counted first
+            self._batch = np.empty((self.RGB_BATCH_FRAMES, *sample.shape), np.uint8)
+        self._batch[self._batched] = sample
+        self._batched += 1
+        if self._batched == self.RGB_BATCH_FRAMES:
+            self._count_batch()
+
+    def _count_batch(self) -> None:
+        """Count the held RGB samples into the histogram: PIL, the three channels in one pass."""
+        if self._batch is None or not self._batched or self._hist is None:
+            return
+        held = self._batch[: self._batched]
+        stacked = held.reshape(-1, *held.shape[2:])  # the samples one under another: one image
+        counts = PILImage.fromarray(stacked).histogram()
+        self._hist += np.asarray(counts, dtype=np.int64).reshape(_RGB, _BYTE_VALUES)
+        self._batched = 0
 
     @property
     def frames(self) -> int:
@@ -84,6 +110,7 @@ class ImageStatsAccumulator:
         return histogram_stats(self.histogram(), self._frames, self.levels)
 
     def histogram(self) -> npt.NDArray[np.int64]:
+        self._count_batch()
         return self._hist.copy() if self._hist is not None else np.zeros((3, self._bins), dtype=np.int64)
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -81,3 +82,26 @@ def test_a_subsampled_frame_counts_exactly_the_sampled_pixels() -> None:
     sample = frame[::4, ::4]  # 641 // 150
     expected = [np.bincount(sample[:, :, c].ravel(), minlength=256) for c in range(3)]
     np.testing.assert_array_equal(acc.histogram(), np.stack(expected))
+
+
+def _channel_counts(frames: list[npt.NDArray[np.uint8]]) -> npt.NDArray[np.int64]:
+    pixels = np.concatenate([f.reshape(-1, 3) for f in frames])
+    return np.stack([np.bincount(pixels[:, c], minlength=256) for c in range(3)])
+
+
+def test_colour_frames_counted_in_batches_count_every_frame_once() -> None:
+    """Frames are counted a batch at a time: full batches, a partial one, a size change, and a histogram
+    read between frames all give exactly the counts of every frame seen so far."""
+    rng = np.random.default_rng(3)
+    batch = ImageStatsAccumulator.RGB_BATCH_FRAMES
+    small = [rng.integers(0, 256, size=(12, 20, 3), dtype=np.uint8) for _ in range(2 * batch + 5)]
+    large = [rng.integers(0, 256, size=(30, 16, 3), dtype=np.uint8) for _ in range(batch + 1)]
+    acc = ImageStatsAccumulator(max_side=1000)
+    for frame in small[:7]:
+        acc.update(frame)
+    np.testing.assert_array_equal(acc.histogram(), _channel_counts(small[:7]))  # a partial batch, read
+    for frame in small[7:] + large:
+        acc.update(frame)
+    np.testing.assert_array_equal(acc.histogram(), _channel_counts(small + large))
+    assert acc.frames == len(small) + len(large)
+    assert acc.result()["count"].tolist() == [len(small) + len(large)]

@@ -26,6 +26,8 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from importlib.metadata import version
 from pathlib import Path
 from typing import Any
@@ -36,14 +38,16 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from bench.fleet import fleet_table, measure_fleet
 from bench.report import write_section
 from bench.workloads import WORKLOADS, ensure_workload
+from flows.local_server import LocalServer
 
 BENCH = Path(__file__).resolve().parent
 REPO = BENCH.parent
 TOOLS = ("bagport", "lerobot", "lerobot-streaming", "floor")
-EXTRA_TOOLS = ("bagport-dask1", "bagport-dask2", "bagport-h264", "bagport-nofidelity")
+EXTRA_TOOLS = ("bagport-dask1", "bagport-dask2", "bagport-h264", "bagport-nofidelity", "bagport-server")
 """Not run by default: bagport on a local Dask cluster of 1 or 2 worker processes (scaling),
-bagport with its own default codec (H.264) instead of LeRobot's settings, and bagport without the
-video fidelity check (the work the other tools do)."""
+bagport with its own default codec (H.264) instead of LeRobot's settings, bagport without the
+video fidelity check (the work the other tools do), and bagport against a Prefect server that is
+already running (``PREFECT_API_URL``, as a fleet runs it: :func:`running_server`)."""
 BASELINES = ("lerobot", "lerobot-streaming")
 
 
@@ -72,9 +76,13 @@ def _command(tool: str, workload: Path, out: Path) -> list[str]:
     return [python, str(BENCH / "codec_floor.py"), str(workload), str(out)]
 
 
-def measure(command: list[str], out: Path, *, fresh: bool = True) -> dict[str, float]:
+def measure(
+    command: list[str], out: Path, *, fresh: bool = True, server: LocalServer | None = None
+) -> dict[str, float]:
     """Run one command; wall, CPU seconds and peak RSS of its whole process tree and of the process
-    started (bagport's flow process), output size. ``fresh``: remove the output and staging first."""
+    started (bagport's flow process), output size. ``fresh``: remove the output and staging first.
+    ``server``: a running Prefect server the command uses (``PREFECT_API_URL``); the CPU it spends
+    while the command runs is counted in ``cpu_s`` (and alone in ``server_cpu_s``)."""
     if fresh:
         shutil.rmtree(out, ignore_errors=True)
         shutil.rmtree(out.with_name(out.name + ".staging"), ignore_errors=True)
@@ -83,7 +91,9 @@ def measure(command: list[str], out: Path, *, fresh: bool = True) -> dict[str, f
     # stderr into a file, not a pipe read at the end: the encoder's banners (SVT_LOG unset) and the
     # workers' logs fill a pipe's 64 KB and block the run
     with tempfile.TemporaryFile() as log:
-        proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=log)
+        env = None if server is None else {**os.environ, "PREFECT_API_URL": server.api_url}
+        server_cpu = _cpu_s(server)
+        proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=log, env=env)
         peak, peak_process, peak_root = 0, 0, 0
         while proc.poll() is None:
             try:
@@ -94,6 +104,7 @@ def measure(command: list[str], out: Path, *, fresh: bool = True) -> dict[str, f
                 pass
             time.sleep(0.2)
         wall = time.perf_counter() - started
+        server_cpu = _cpu_s(server) - server_cpu
         log.seek(0)
         stderr = log.read().decode(errors="replace")
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -101,14 +112,38 @@ def measure(command: list[str], out: Path, *, fresh: bool = True) -> dict[str, f
         raise RuntimeError(f"{command[:3]} failed ({proc.returncode}):\n{stderr[-3000:]}")
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.exists() else 0
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {
+    served = {} if server is None else {"server_cpu_s": server_cpu}
+    return served | {
         "wall_s": wall,
-        "cpu_s": cpu,
+        "cpu_s": cpu + server_cpu,
         "peak_rss_mb": peak / 2**20,
         "peak_process_rss_mb": peak_process / 2**20,
         "root_rss_mb": peak_root / 2**20,
         "output_mb": size / 1e6,
     }
+
+
+def _cpu_s(server: LocalServer | None) -> float:
+    if server is None:
+        return 0.0
+    times = psutil.Process(server.pid).cpu_times()
+    return float(times.user + times.system)
+
+
+@contextmanager
+def running_server(tools: list[str]) -> Iterator[LocalServer | None]:
+    """For ``bagport-server``: bagport's temporary server app, started before the runs and stopped after
+    them, so the runs measure a conversion against a server that is up (a fleet's own, ``make stack``),
+    without the temporary server's boot (about 2 s on 2 cores) on their path."""
+    if "bagport-server" not in tools:
+        yield None
+        return
+    server = LocalServer()
+    try:
+        server.wait_ready(120)
+        yield server
+    finally:
+        server.stop()
 
 
 def _machine() -> dict[str, Any]:
@@ -230,11 +265,13 @@ def main() -> None:
             t: args.baseline_runs if t in BASELINES and args.baseline_runs else args.runs for t in tools
         }
         measured: dict[str, list[dict[str, float]]] = {t: [] for t in tools}
-        for round_index in range(max(counts.values())):  # interleaved: this machine's speed drifts
-            for tool in tools:
-                if round_index < counts[tool]:
-                    out = args.data / "out" / f"{name}-{tool}"
-                    measured[tool].append(measure(_command(tool, folder, out), out))
+        with running_server(tools) as server:
+            for round_index in range(max(counts.values())):  # interleaved: this machine's speed drifts
+                for tool in tools:
+                    if round_index < counts[tool]:
+                        out = args.data / "out" / f"{name}-{tool}"
+                        on = server if tool == "bagport-server" else None
+                        measured[tool].append(measure(_command(tool, folder, out), out, server=on))
         for tool, runs in measured.items():
             cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]} | {
                 "runs": len(runs)

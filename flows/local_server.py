@@ -91,6 +91,13 @@ class LocalServer:
             os.close(lifeline_r)
         atexit.register(self.stop)  # also when the CLI fails before the flow starts
 
+    @property
+    def pid(self) -> int:
+        """The server's process id (while it runs)."""
+        if self._process is None:
+            raise RuntimeError("the temporary Prefect server was stopped")
+        return self._process.pid
+
     def wait_ready(self, timeout_s: float) -> None:
         """Block until the API answers its health check; raises ``RuntimeError`` after ``timeout_s``."""
         deadline = time.monotonic() + timeout_s

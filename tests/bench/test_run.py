@@ -69,3 +69,23 @@ def test_measure_survives_a_run_that_writes_more_than_a_pipe_holds_to_stderr(tmp
     failing = [sys.executable, "-c", "import sys; sys.stderr.write('y' * 1_000_000 + 'the end'); sys.exit(3)"]
     with pytest.raises(RuntimeError, match=r"(?s)failed \(3\):\n.*the end$"):
         measure(failing, tmp_path / "out")
+
+
+def test_bagport_server_runs_against_one_running_server_whose_cpu_is_counted(tmp_path: Path) -> None:
+    """``bagport-server``: the runs see the harness's server through ``PREFECT_API_URL``, and the CPU the
+    server spends on a run is counted in the run's ``cpu_s``."""
+    from bench.run import measure, running_server  # noqa: PLC0415 - bench is not a dependency of the other tests
+
+    with running_server(["bagport"]) as none:
+        assert none is None  # only bagport-server starts one
+    calls = (
+        "import os, urllib.request\n"
+        "url = os.environ['PREFECT_API_URL']\n"
+        "for _ in range(200): urllib.request.urlopen(url + '/admin/version').read()\n"
+        "print(url)\n"
+    )
+    with running_server(["floor", "bagport-server"]) as server:
+        assert server is not None
+        measured = measure([sys.executable, "-c", calls], tmp_path / "out", server=server)
+    assert measured["server_cpu_s"] > 0
+    assert measured["cpu_s"] >= measured["server_cpu_s"]

@@ -331,11 +331,6 @@ def _cancel_ray(ref: Any) -> bool:
     return True
 
 
-def _on_local_pool(config: ConvertConfig) -> bool:
-    """Whether the config's episodes run on the local process pool (a single worker runs on a thread)."""
-    return config.runner == "process" and config.resolved_workers() > 1
-
-
 def run_config(config: ConvertConfig) -> DatasetReport:
     """Run the conversion flow (or subflow, inside a deployment's flow) with the config's task runner."""
     workers = config.resolved_workers()
@@ -344,7 +339,7 @@ def run_config(config: ConvertConfig) -> DatasetReport:
         runner = dask_runner(config, workers)
     elif config.runner == "ray":
         runner = ray_runner(config, workers)
-    elif _on_local_pool(config):
+    elif config.on_local_pool():
         runner = WarmProcessPoolTaskRunner(max_workers=workers)
     else:
         runner = ThreadPoolTaskRunner(max_workers=workers)
@@ -385,7 +380,7 @@ def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetRe
     # bad manifests, contracts and outputs fail here, before Prefect starts
     _CHECKED[:] = [plan if plan is not None else plan_run(config)]
     # with nothing to convert (every episode staged already) no worker starts: no forkserver either
-    warm = _on_local_pool(config) and bool(_CHECKED[0].requests)
+    warm = config.on_local_pool() and bool(_CHECKED[0].requests)
     if warm:
         forkserver.start()  # the workers' imports run now, while the temporary Prefect server boots
     stopping: threading.Thread | None = None

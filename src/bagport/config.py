@@ -210,3 +210,8 @@ class ConvertConfig(BaseModel):
     def resolved_workers(self) -> int:
         """Parallel episodes: ``workers``, else this machine's CPU count."""
         return self.workers or os.cpu_count() or 1
+
+    def on_local_pool(self) -> bool:
+        """Whether the episodes run on the local process pool (``runner: process``, more than one worker;
+        a single worker runs on a thread)."""
+        return self.runner == "process" and self.resolved_workers() > 1

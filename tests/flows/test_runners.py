@@ -9,6 +9,7 @@ import sys
 import threading
 import time
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import psutil
@@ -168,3 +169,41 @@ def test_a_run_on_the_warm_pool_leaves_no_forkserver(tmp_path: Path, monkeypatch
     assert run_convert(config).episodes == 2
     assert not _forkservers()
     assert not [t for t in threading.enumerate() if t.name == "bagport-forkserver-stop"]
+
+
+def test_against_a_running_server_the_workers_imports_begin_before_prefects(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """With a configured API the flow starts once Prefect is imported: the forkserver is started before
+    those imports (then its workers are ready for the first task runs); with a temporary server, or
+    with nothing to convert, not there (run_convert starts it, after the imports, when there is work)."""
+    import flows.cli  # noqa: PLC0415 - the module under test
+    import flows.convert  # noqa: PLC0415 - its entry is replaced below
+
+    calls: list[str] = []
+
+    def start() -> bool:
+        calls.append("forkserver")
+        return True
+
+    monkeypatch.setattr(forkserver, "start", start)
+    monkeypatch.setattr(flows.convert, "run_convert", lambda config, plan: calls.append("flow"))
+    config = ConvertConfig(
+        bags_glob=str(tmp_path / "bags/*"),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(tmp_path / "ds"),
+        workers=2,
+    )
+    work, none = SimpleNamespace(requests=("a bag",)), SimpleNamespace(requests=())
+    for plan, server_up, expected in (
+        (work, True, ["forkserver", "flow"]),
+        (work, False, ["flow"]),
+        (none, True, ["flow"]),
+    ):
+        calls.clear()
+        flows.cli._run_flow(config, plan, False, server_up=server_up)  # type: ignore[arg-type]
+        assert calls == expected, (server_up, plan)
+    calls.clear()
+    one_worker = config.model_copy(update={"workers": 1})  # a thread, no pool
+    flows.cli._run_flow(one_worker, work, False, server_up=True)  # type: ignore[arg-type]
+    assert calls == ["flow"]

@@ -147,15 +147,17 @@ def _run_flow(config: ConvertConfig, plan: RunPlan, show_bar: bool, *, server_up
     from flows import forkserver  # noqa: PLC0415 - standard library only
     from flows.import_gc import paused  # noqa: PLC0415 - standard library only
 
-    if server_up and config.on_local_pool() and plan.requests:
+    warm = config.on_local_pool() and bool(plan.requests)
+    if server_up and warm:
         # The flow starts as soon as Prefect is imported: the workers' imports begin now, beside those,
-        # or its first task runs wait for them (0.65 s on W3). With a temporary server they begin in
-        # run_convert, after these imports, and use the core its boot leaves.
-        forkserver.start()
+        # or its first task runs wait for them (0.65 s on W3).
+        forkserver.start(fork_this_process=True)
     with paused():
         from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
         from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
 
+    if warm and not server_up:  # with a temporary server, now: a fork of this process, with these imports
+        forkserver.start(fork_this_process=True)
     if show_bar:
         LISTENERS.append(_progress_bar)
     try:

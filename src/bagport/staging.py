@@ -15,8 +15,10 @@
 from __future__ import annotations
 
 import json
+import os
 import posixpath
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 from typing import Any
 
 import fsspec
@@ -27,6 +29,7 @@ from pydantic import JsonValue
 
 from bagport.errors import TransientError
 from bagport.timewindow import WindowNs
+from bagport.uris import is_local
 
 __all__ = [
     "EPISODE_SUMMARY",
@@ -139,11 +142,21 @@ def staged_path(base: str, *parts: str) -> str:
 
 
 def write_json(uri: str, data: Any) -> None:
+    """``data`` as JSON at ``uri``, whole or not at all. On the local disk it is written beside its place
+    and renamed there: a run killed while writing an episode's summary (its completion marker) left it
+    cut short, and the next run failed on it instead of converting the episode again. An object store's
+    write (one PUT) is whole already."""
     fs, path = url_to_fs(uri)
     fs.makedirs(posixpath.dirname(path), exist_ok=True)
+    text = json.dumps(data, indent=1, sort_keys=False)
     try:
-        with fs.open(path, "w", encoding="utf-8") as handle:
-            json.dump(data, handle, indent=1, sort_keys=False)
+        if is_local(fs):
+            partial = Path(f"{path}.partial-{os.getpid()}")
+            partial.write_text(text, encoding="utf-8")
+            partial.replace(path)
+        else:
+            with fs.open(path, "w", encoding="utf-8") as handle:
+                handle.write(text)
     except ConnectionError as err:
         raise TransientError(f"{uri}: write failed ({err}); try again") from err
 
@@ -161,10 +174,12 @@ def read_staged_table(uri: str) -> pa.Table:
 
 
 def read_summary(dir_uri: str) -> EpisodeSummary | None:
-    """The summary of a completed staged episode, or ``None`` if it never completed."""
+    """The summary of a completed staged episode, or ``None`` if it never completed: no summary, or one
+    that cannot be read (cut short by a run killed while an older bagport wrote it; as the plan does, such
+    an episode is converted again, which rewrites it)."""
     uri = staged_path(dir_uri, EPISODE_SUMMARY)
     try:
         with fsspec.open(uri, "r", encoding="utf-8") as handle:
             return EpisodeSummary.from_dict(json.load(handle))
-    except FileNotFoundError:
+    except (FileNotFoundError, ValueError, KeyError, TypeError):
         return None

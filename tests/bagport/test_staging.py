@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import fsspec
@@ -9,7 +10,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from bagport.staging import read_staged_table
+from bagport.staging import EPISODE_SUMMARY, read_staged_table, read_summary, write_json
 
 
 def _frames_like() -> pa.Table:
@@ -34,3 +35,35 @@ def test_a_staged_table_reads_back_whole(tmp_path: Path, scheme: str) -> None:
     read = read_staged_table(uri)
     assert read.equals(table)
     assert read.schema.metadata == table.schema.metadata
+
+
+def test_a_summary_cut_short_is_an_episode_that_never_completed(tmp_path: Path) -> None:
+    """A summary left half written (a run killed while an older bagport wrote it) is read as no summary:
+    the episode is converted again, as the plan decides, not failed on."""
+    folder = tmp_path / "episodes" / "ep000"
+    folder.mkdir(parents=True)
+    (folder / EPISODE_SUMMARY).write_text('{"episode_id": "ep000", "bag_uri": "/bags/ep')
+    assert read_summary(str(folder)) is None
+    (folder / EPISODE_SUMMARY).write_text('{"episode_id": "ep000"}')  # whole, but not a summary
+    assert read_summary(str(folder)) is None
+
+
+def test_a_json_write_killed_before_it_ends_leaves_no_file(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    target = tmp_path / "episodes" / "ep000" / EPISODE_SUMMARY
+    write_json(str(target), {"episode_id": "ep000", "frames": 3})
+    assert json.loads(target.read_text()) == {"episode_id": "ep000", "frames": 3}
+    assert [p.name for p in target.parent.iterdir()] == [EPISODE_SUMMARY]  # nothing beside it
+
+    def killed(self: Path, target: str) -> None:
+        raise KeyboardInterrupt  # the process stops between writing and renaming
+
+    fresh = tmp_path / "episodes" / "ep001" / EPISODE_SUMMARY
+    monkeypatch.setattr(Path, "replace", killed)
+    with pytest.raises(KeyboardInterrupt):
+        write_json(str(fresh), {"episode_id": "ep001", "frames": 3})
+    assert not fresh.exists()  # no completion marker: the episode is converted again
+    with pytest.raises(KeyboardInterrupt):
+        write_json(str(target), {"episode_id": "ep000", "frames": 4})
+    assert json.loads(target.read_text()) == {"episode_id": "ep000", "frames": 3}  # the earlier one, whole

@@ -29,6 +29,20 @@ def _tree(process: psutil.Process) -> list[psutil.Process]:
         return []
 
 
+def _pool(processes: list[psutil.Process]) -> list[psutil.Process]:
+    """The pool's processes among a run's: its forkserver (a fork of the CLI, so it has the CLI's command
+    line, as have the workers forked from it) and its workers; not the server or the resource tracker."""
+    pool = []
+    for process in processes:
+        try:
+            command = " ".join(process.cmdline())
+        except psutil.Error:
+            continue
+        if "uvicorn" not in command and "resource_tracker" not in command:
+            pool.append(process)
+    return pool
+
+
 def test_a_killed_run_leaves_no_server_worker_or_forkserver_behind(tmp_path: Path) -> None:
     for i in range(BAGS):
         write_episode_bag(
@@ -49,13 +63,14 @@ def test_a_killed_run_leaves_no_server_worker_or_forkserver_behind(tmp_path: Pat
         try:
             deadline = time.monotonic() + 120
             while time.monotonic() < deadline and run.poll() is None:  # until its workers convert
-                if sum("forkserver" in " ".join(p.cmdline()) for p in _tree(run) if p.is_running()) >= 3:
+                if len(_pool(_tree(run))) >= 3:
                     break
                 time.sleep(0.1)
             started = _tree(run)
             assert run.poll() is None, "the run ended before its workers started: give it more bags"
             assert any("uvicorn" in " ".join(p.cmdline()) for p in started)  # the server, and
-            assert sum("forkserver" in " ".join(p.cmdline()) for p in started) >= 3  # forkserver + workers
+            assert len(_pool(started)) >= 3  # forkserver + workers
+            assert not [p for p in started if "multiprocessing.forkserver" in " ".join(p.cmdline())]  # forked
             os.kill(run.pid, signal.SIGKILL)  # the run alone, not its process group
             run.wait()
             gone, alive = psutil.wait_procs(started, timeout=30)

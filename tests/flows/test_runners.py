@@ -8,6 +8,8 @@ import os
 import sys
 import threading
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -171,22 +173,30 @@ def test_a_run_on_the_warm_pool_leaves_no_forkserver(tmp_path: Path, monkeypatch
     assert not [t for t in threading.enumerate() if t.name == "bagport-forkserver-stop"]
 
 
-def test_against_a_running_server_the_workers_imports_begin_before_prefects(
+def test_the_cli_forks_its_forkserver_before_prefects_imports_against_a_running_server(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """With a configured API the flow starts once Prefect is imported: the forkserver is started before
-    those imports (then its workers are ready for the first task runs); with a temporary server, or
-    with nothing to convert, not there (run_convert starts it, after the imports, when there is work)."""
+    those imports (then its workers are ready for the first task runs); with a temporary server after
+    them (the fork then has them); with nothing to convert or a single worker, never. The CLI's
+    forkserver is a fork of the CLI."""
     import flows.cli  # noqa: PLC0415 - the module under test
     import flows.convert  # noqa: PLC0415 - its entry is replaced below
+    import flows.import_gc  # noqa: PLC0415 - its imports are recorded below
 
     calls: list[str] = []
 
-    def start() -> bool:
-        calls.append("forkserver")
+    def start(*, fork_this_process: bool = False) -> bool:
+        calls.append(f"forkserver fork={fork_this_process}")
         return True
 
+    @contextmanager
+    def imports() -> Iterator[None]:
+        calls.append("imports")
+        yield
+
     monkeypatch.setattr(forkserver, "start", start)
+    monkeypatch.setattr(flows.import_gc, "paused", imports)
     monkeypatch.setattr(flows.convert, "run_convert", lambda config, plan: calls.append("flow"))
     config = ConvertConfig(
         bags_glob=str(tmp_path / "bags/*"),
@@ -195,15 +205,14 @@ def test_against_a_running_server_the_workers_imports_begin_before_prefects(
         workers=2,
     )
     work, none = SimpleNamespace(requests=("a bag",)), SimpleNamespace(requests=())
-    for plan, server_up, expected in (
-        (work, True, ["forkserver", "flow"]),
-        (work, False, ["flow"]),
-        (none, True, ["flow"]),
+    one_worker = config.model_copy(update={"workers": 1})  # a thread, no pool
+    for options, plan, server_up, expected in (
+        (config, work, True, ["forkserver fork=True", "imports", "flow"]),
+        (config, work, False, ["imports", "forkserver fork=True", "flow"]),
+        (config, none, True, ["imports", "flow"]),
+        (config, none, False, ["imports", "flow"]),
+        (one_worker, work, True, ["imports", "flow"]),
     ):
         calls.clear()
-        flows.cli._run_flow(config, plan, False, server_up=server_up)  # type: ignore[arg-type]
-        assert calls == expected, (server_up, plan)
-    calls.clear()
-    one_worker = config.model_copy(update={"workers": 1})  # a thread, no pool
-    flows.cli._run_flow(one_worker, work, False, server_up=True)  # type: ignore[arg-type]
-    assert calls == ["flow"]
+        flows.cli._run_flow(options, plan, False, server_up=server_up)  # type: ignore[arg-type]
+        assert calls == expected, (server_up, plan, options.workers)

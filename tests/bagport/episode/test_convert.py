@@ -203,7 +203,11 @@ def test_a_staging_store_on_another_file_system_gets_the_same_files_copied(
     write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5))
     renamed = Path(convert_episode(_request(bag, tmp_path / "same-disk")).dir_uri)
 
+    rename = Path.replace
+
     def across_disks(self: Path, target: str | Path) -> Path:
+        if ".partial-" in self.name:  # the summary's own write, renamed within its folder in the store
+            return rename(self, target)
         raise OSError(errno.EXDEV, "Invalid cross-device link", str(self))
 
     monkeypatch.setattr(Path, "replace", across_disks)

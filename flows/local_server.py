@@ -106,7 +106,10 @@ class LocalServer:
                 code = None if self._process is None else self._process.returncode
                 raise RuntimeError(f"the temporary Prefect server exited (code {code}) before it was ready")
             try:
-                with urllib.request.urlopen(f"{self.api_url}/health", timeout=2) as response:
+                # the listener is bound already: the request waits for the app, however long it boots
+                # (with 2 s, a boot of 2.1 s on a busy VM took a retry), and a server that dies resets it
+                wait_s = max(0.1, min(10.0, deadline - time.monotonic()))
+                with urllib.request.urlopen(f"{self.api_url}/health", timeout=wait_s) as response:
                     if response.status == 200:
                         return
             except (urllib.error.URLError, ConnectionError, TimeoutError):

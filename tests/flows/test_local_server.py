@@ -61,6 +61,19 @@ def test_an_api_in_project_settings_is_used(no_prefect_config: Path, name: str, 
     assert api_configured()
 
 
+def test_a_server_that_dies_while_booting_is_reported_as_such() -> None:
+    """Its health check waits on the bound listener for as long as the boot takes, and a server that exits
+    meanwhile ends the wait at once (its connection is reset), not at the timeout."""
+    server = LocalServer(
+        {"PREFECT_API_DATABASE_CONNECTION_URL": "nodriver://nowhere"}
+    )  # the app cannot start
+    try:
+        with pytest.raises(RuntimeError, match=r"exited \(code \d+\) before it was ready"):
+            server.wait_ready(60)
+    finally:
+        server.stop()
+
+
 @pytest.mark.slow
 def test_the_server_answers_then_stops() -> None:
     server = LocalServer()

@@ -23,8 +23,10 @@ with paused():  # frozen after: the forked workers' collections skip them (flows
     import flows.convert
     import tasks.episode
     import tasks.segment
+    from bagport.bags import prepare_reading
 
     _COLLECTIONS = load_prefect_collections()
+    prepare_reading()  # rosbags' type stores: built once here, not in each worker's first episode
 
 __all__ = ["PRELOADED"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from bagport.bags.detect import detect_storage
 from bagport.bags.message import BagMessage
-from bagport.bags.reader import BagReader, open_bag
+from bagport.bags.reader import BagReader, open_bag, prepare_reading
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.stamp import source_stamp
 from bagport.bags.text import format_bag_info
@@ -21,6 +21,7 @@ __all__ = [
     "detect_storage",
     "format_bag_info",
     "open_bag",
+    "prepare_reading",
     "read_msg_path",
     "source_stamp",
 ]

@@ -92,7 +92,7 @@ def measure(
     # workers' logs fill a pipe's 64 KB and block the run
     with tempfile.TemporaryFile() as log:
         env = None if server is None else {**os.environ, "PREFECT_API_URL": server.api_url}
-        server_cpu = _cpu_s(server)
+        server_cpu_s = _cpu_s(server)
         proc = psutil.Popen(command, cwd=REPO, stdout=subprocess.DEVNULL, stderr=log, env=env)
         peak, peak_process, peak_root = 0, 0, 0
         while proc.poll() is None:
@@ -104,7 +104,7 @@ def measure(
                 pass
             time.sleep(0.2)
         wall = time.perf_counter() - started
-        server_cpu = _cpu_s(server) - server_cpu
+        server_cpu_s = _cpu_s(server) - server_cpu_s
         log.seek(0)
         stderr = log.read().decode(errors="replace")
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -112,10 +112,10 @@ def measure(
         raise RuntimeError(f"{command[:3]} failed ({proc.returncode}):\n{stderr[-3000:]}")
     size = sum(p.stat().st_size for p in out.rglob("*") if p.is_file()) if out.exists() else 0
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    served = {} if server is None else {"server_cpu_s": server_cpu}
+    served = {} if server is None else {"server_cpu_s": server_cpu_s}
     return served | {
         "wall_s": wall,
-        "cpu_s": cpu + server_cpu,
+        "cpu_s": cpu + server_cpu_s,
         "peak_rss_mb": peak / 2**20,
         "peak_process_rss_mb": peak_process / 2**20,
         "root_rss_mb": peak_root / 2**20,
@@ -132,9 +132,10 @@ def _cpu_s(server: LocalServer | None) -> float:
 
 @contextmanager
 def running_server(tools: list[str]) -> Iterator[LocalServer | None]:
-    """For ``bagport-server``: bagport's temporary server app, started before the runs and stopped after
-    them, so the runs measure a conversion against a server that is up (a fleet's own, ``make stack``),
-    without the temporary server's boot (about 2 s on 2 cores) on their path."""
+    """For ``bagport-server``: bagport's temporary server app (SQLite), started before the runs and stopped
+    after them, one for all of them, so the runs measure a conversion against a server that is up, as
+    a fleet's long-running one is (``make stack``'s runs on PostgreSQL), without the temporary server's
+    boot (about 2 s on 2 cores) on their path. Its CPU during a run is counted, its memory is not."""
     if "bagport-server" not in tools:
         yield None
         return
@@ -201,7 +202,7 @@ def write_report(results: dict[str, Any], report: Path) -> None:
         write_section(report, "fleet", fleet_table(fleet["fleet"], fleet["description"]))
 
 
-def main() -> None:
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
@@ -225,7 +226,45 @@ def main() -> None:
     parser.add_argument(
         "--keep-outputs", action="store_true", help="keep each tool's last output under DATA/out"
     )
-    args = parser.parse_args()
+    return parser
+
+
+def _tool_cells(name: str, folder: Path, tools: list[str], args: argparse.Namespace) -> dict[str, Any]:
+    """Each tool's medians on one workload, the tools' runs interleaved (this machine's speed drifts)."""
+    counts = {t: args.baseline_runs if t in BASELINES and args.baseline_runs else args.runs for t in tools}
+    measured: dict[str, list[dict[str, float]]] = {t: [] for t in tools}
+    with running_server(tools) as server:
+        for round_index in range(max(counts.values())):
+            for tool in tools:
+                if round_index < counts[tool]:
+                    out = args.data / "out" / f"{name}-{tool}"
+                    on = server if tool == "bagport-server" else None
+                    measured[tool].append(measure(_command(tool, folder, out), out, server=on))
+    cells: dict[str, Any] = {}
+    for tool, runs in measured.items():
+        cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]} | {"runs": len(runs)}
+        print(f"{name} {tool}: {cells[tool]}", file=sys.stderr, flush=True)
+    return cells
+
+
+def _workload_result(
+    name: str, tools: list[str], args: argparse.Namespace, earlier: dict[str, Any]
+) -> dict[str, Any]:
+    """One workload's entry in the results: W4's fleet runs, or each tool's cells (beside ``earlier``'s)."""
+    workload = WORKLOADS[name].scaled(args.scale)
+    print(
+        f"{name}: generating {workload.episodes} x {workload.duration_s:g} s ...", file=sys.stderr, flush=True
+    )
+    folder = ensure_workload(workload, args.data)
+    entry: dict[str, Any] = {"description": workload.description, "recorded_s": workload.recorded_s}
+    if name == "W4":  # a fleet: bagport's first run and re-runs, not a comparison of tools
+        return entry | {"fleet": measure_fleet(folder, args.data / "out", workload.episodes)}
+    cells = _tool_cells(name, folder, tools, args)
+    return entry | {"tools": {**earlier.get("tools", {}), **cells}}  # tools measured before stay
+
+
+def main() -> None:
+    args = _parser().parse_args()
     tools = [t for t in args.tools.split(",") if t]
     results: dict[str, Any] = {"machine": _machine(), "runs": args.runs, "scale": args.scale, "workloads": {}}
     if args.keep_other_results and args.results.exists():  # add to the workloads measured before
@@ -244,45 +283,8 @@ def main() -> None:
             ]
             subprocess.run(script, check=True, cwd=REPO)
             continue
-        workload = WORKLOADS[name].scaled(args.scale)
-        print(
-            f"{name}: generating {workload.episodes} x {workload.duration_s:g} s ...",
-            file=sys.stderr,
-            flush=True,
-        )
-        folder = ensure_workload(workload, args.data)
-        if name == "W4":  # a fleet: bagport's first run and re-runs, not a comparison of tools
-            results["workloads"][name] = {
-                "description": workload.description,
-                "recorded_s": workload.recorded_s,
-                "fleet": measure_fleet(folder, args.data / "out", workload.episodes),
-            }
-            args.results.write_text(json.dumps(results, indent=1))
-            write_report(results, args.report)
-            continue
-        cells: dict[str, Any] = {}
-        counts = {
-            t: args.baseline_runs if t in BASELINES and args.baseline_runs else args.runs for t in tools
-        }
-        measured: dict[str, list[dict[str, float]]] = {t: [] for t in tools}
-        with running_server(tools) as server:
-            for round_index in range(max(counts.values())):  # interleaved: this machine's speed drifts
-                for tool in tools:
-                    if round_index < counts[tool]:
-                        out = args.data / "out" / f"{name}-{tool}"
-                        on = server if tool == "bagport-server" else None
-                        measured[tool].append(measure(_command(tool, folder, out), out, server=on))
-        for tool, runs in measured.items():
-            cells[tool] = {key: statistics.median(r[key] for r in runs) for key in runs[0]} | {
-                "runs": len(runs)
-            }
-            print(f"{name} {tool}: {cells[tool]}", file=sys.stderr, flush=True)
-        earlier = results["workloads"].get(name, {}).get("tools", {})
-        results["workloads"][name] = {
-            "description": workload.description,
-            "recorded_s": workload.recorded_s,
-            "tools": {**earlier, **cells},  # tools measured before (--keep-other-results) stay
-        }
+        earlier = results["workloads"].get(name, {})
+        results["workloads"][name] = _workload_result(name, tools, args, earlier)
         args.results.write_text(json.dumps(results, indent=1))
         write_report(results, args.report)
     if not args.keep_outputs:

@@ -123,7 +123,9 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
         if show_bar:
             print(file=sys.stderr)  # ends the "starting" line
     else:
-        report = _run_flow(config, plan, show_bar, server_up=not throwaway_api)
+        report = _run_flow(
+            config, plan, show_bar, server_up=not throwaway_api, fork_cli=getattr(args, "as_program", False)
+        )
     if not args.quiet:
         print(summary_json(report))
     for fmt, output in report.outputs.items():
@@ -142,8 +144,12 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     return 1 if any(not row.excluded_by_label for row in report.excluded) else 0
 
 
-def _run_flow(config: ConvertConfig, plan: RunPlan, show_bar: bool, *, server_up: bool) -> DatasetReport:
-    """Run the flow; ``server_up``: against a configured Prefect API (no temporary server boots)."""
+def _run_flow(
+    config: ConvertConfig, plan: RunPlan, show_bar: bool, *, server_up: bool, fork_cli: bool
+) -> DatasetReport:
+    """Run the flow; ``server_up``: against a configured Prefect API (no temporary server boots).
+    ``fork_cli``: this process is the ``bagport`` program (not a caller of :func:`main`, such as a test
+    or a script), so the pool's forkserver can be a fork of it (:func:`flows.forkserver.start`)."""
     from flows import forkserver  # noqa: PLC0415 - standard library only
     from flows.import_gc import paused  # noqa: PLC0415 - standard library only
 
@@ -151,13 +157,13 @@ def _run_flow(config: ConvertConfig, plan: RunPlan, show_bar: bool, *, server_up
     if server_up and warm:
         # The flow starts as soon as Prefect is imported: the workers' imports begin now, beside those,
         # or its first task runs wait for them (0.65 s on W3).
-        forkserver.start(fork_this_process=True)
+        forkserver.start(fork_this_process=fork_cli)
     with paused():
         from flows.artifacts import LISTENERS  # noqa: PLC0415 - imports Prefect
         from flows.convert import run_convert  # noqa: PLC0415 - imports Prefect
 
     if warm and not server_up:  # with a temporary server, now: a fork of this process, with these imports
-        forkserver.start(fork_this_process=True)
+        forkserver.start(fork_this_process=fork_cli)
     if show_bar:
         LISTENERS.append(_progress_bar)
     try:
@@ -353,7 +359,9 @@ def _episodes_failed(err: BagportError) -> bool:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The ``bagport`` program (``argv`` ``None``: the command line's), or a call of it from Python."""
     args = build_parser().parse_args(argv)
+    args.as_program = argv is None  # a process of its own: the pool's forkserver may be a fork of it
     if getattr(args, "verbose", False):
         os.environ["PREFECT_LOGGING_LEVEL"] = "INFO"  # before Prefect is imported: task and flow logs
     elif getattr(args, "quiet", False):

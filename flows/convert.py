@@ -395,3 +395,5 @@ def run_convert(config: ConvertConfig, plan: RunPlan | None = None) -> DatasetRe
         _CHECKED.clear()
         if stopping is not None:
             stopping.join()
+        elif warm:  # no flow ran (its API could not be reached): the forkserver is not left behind
+            forkserver.stop()

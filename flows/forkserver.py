@@ -8,11 +8,12 @@ all that once (:mod:`flows.worker_preload`), so a worker starts with it done.
 
 :func:`start` is called as soon as a run on the local process pool is known (``run_convert``, before
 the wait for the temporary Prefect server), so the forkserver's imports use the core the CLI leaves
-idle while that server boots. The CLI, which has imported Prefect and bagport by then, starts it with
-``fork_this_process``: the forkserver is a fork of the CLI and imports only what it still lacks
-(:func:`_start_forked`), instead of a fresh interpreter importing everything again: 1.2-1.9 CPU s less
-per run, on the two cores the temporary server's boot needs too (W3: 15.4 s against 16.0 s, three
-interleaved pairs). Standard library only.
+idle while that server boots. The ``bagport`` program starts it with ``fork_this_process``: the
+forkserver is a fork of the CLI and imports only what it still lacks (:func:`_start_forked`), instead
+of a fresh interpreter importing everything again. With a temporary server the CLI has imported
+Prefect and bagport by then: 1.2-1.9 CPU s less per run, on the two cores the server's boot needs too
+(W3: 15.4 s against 16.0 s, three interleaved pairs); against a running server it forks before those
+imports, so the flow's first task runs do not wait for them. Standard library only.
 """
 
 from __future__ import annotations
@@ -22,10 +23,11 @@ import multiprocessing.forkserver
 import os
 import socket
 import threading
+import traceback
 import warnings
 from multiprocessing import connection, resource_tracker, util
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 __all__ = ["PRELOAD", "available", "start", "stop", "stop_in_background"]
 
@@ -61,7 +63,7 @@ def _start_forked() -> None:
     its state), with the forkserver forked from this process instead of spawned. The child runs
     multiprocessing's own forkserver loop, which imports :data:`PRELOAD` (only what this process has
     not imported), and leaves by ``os._exit``: this process's exit handlers (stopping the temporary
-    server) are not its own."""
+    server) are not its own. Where the fork fails, the forkserver is a fresh interpreter as usual."""
     server: Any = getattr(multiprocessing.forkserver, "_forkserver")  # noqa: B009 - the module's one instance
     with server._lock:
         resource_tracker.ensure_running()  # before the fork: the workers share this process's tracker
@@ -74,22 +76,49 @@ def _start_forked() -> None:
                 Path(address).chmod(0o600)
             listener.listen()
             alive_r, alive_w = os.pipe()  # the forkserver ends when every write end is closed
-            with warnings.catch_warnings():
-                # Python warns of any thread it did not start: numpy's BLAS and pyarrow's jemalloc keep
-                # one each, and both reset them in a forked child, as every forkserver's fork of a
-                # worker (whose imports start the same threads) relies on; no Python thread runs here
-                warnings.filterwarnings("ignore", r"This process .* is multi-threaded", DeprecationWarning)
-                pid = os.fork()
-            if pid == 0:  # the forkserver
-                try:
-                    os.close(alive_w)
-                    multiprocessing.forkserver.main(listener.fileno(), alive_r, list(PRELOAD))
-                finally:
-                    os._exit(0)
-            os.close(alive_r)
-            server._forkserver_address = address
-            server._forkserver_alive_fd = alive_w
-            server._forkserver_pid = pid
+            pid: int | None
+            try:
+                pid = _fork()
+            except OSError:
+                os.close(alive_r)
+                os.close(alive_w)
+                pid = None
+            if pid == 0:
+                _serve(server, listener, alive_r, alive_w)
+            if pid is not None:
+                os.close(alive_r)
+                server._forkserver_address = address
+                server._forkserver_alive_fd = alive_w
+                server._forkserver_pid = pid
+    if pid is None:  # no fork (out of memory, a process limit): a spawned forkserver
+        multiprocessing.forkserver.ensure_running()
+
+
+def _fork() -> int:
+    with warnings.catch_warnings():
+        # Python warns of any thread it did not start: numpy's BLAS and pyarrow's jemalloc keep one
+        # each, and both reset them in a forked child, as every forkserver's fork of a worker (whose
+        # imports start the same threads) relies on; no Python thread runs here (start() checks)
+        warnings.filterwarnings("ignore", r"This process .* is multi-threaded", DeprecationWarning)
+        return os.fork()
+
+
+def _serve(server: Any, listener: socket.socket, alive_r: int, alive_w: int) -> NoReturn:
+    """The forked child: multiprocessing's forkserver loop, until the parent's end of the alive pipe
+    closes. Its lock, held by the parent at the fork, is a fresh one here; a preload that fails prints
+    its traceback and the forkserver exits 1 (the pool then reports its workers as broken)."""
+    code = 0
+    try:
+        server._lock = threading.Lock()
+        os.close(alive_w)
+        multiprocessing.forkserver.main(listener.fileno(), alive_r, list(PRELOAD))
+    except SystemExit:  # how its loop ends: the alive pipe closed
+        pass
+    except BaseException:  # the child's last word, then its exit
+        traceback.print_exc()
+        code = 1
+    finally:
+        os._exit(code)
 
 
 def stop() -> None:

@@ -23,6 +23,7 @@ import time
 import tomllib
 import urllib.error
 import urllib.request
+import weakref
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -90,6 +91,24 @@ class LocalServer:
             listener.close()  # the server process holds its own copies
             os.close(lifeline_r)
         atexit.register(self.stop)  # also when the CLI fails before the flow starts
+        # a process forked from this one (the CLI's forkserver, its workers) is not the server's owner
+        forget = weakref.WeakMethod(self._forget_in_child)
+
+        def after_fork_in_child() -> None:
+            method = forget()
+            if method is not None:
+                method()
+
+        os.register_at_fork(after_in_child=after_fork_in_child)
+
+    def _forget_in_child(self) -> None:
+        """In a forked child: close its copy of the lifeline's write end (the server ends with the
+        process that started it, not with the last of its forks) and never stop the server from there."""
+        if self._process is None:
+            return
+        self._process = None
+        os.close(self._lifeline_w)
+        atexit.unregister(self.stop)
 
     @property
     def pid(self) -> int:

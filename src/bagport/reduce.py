@@ -126,7 +126,8 @@ def read_staged(staged: Sequence[PlannedEpisode]) -> tuple[list[EpisodeSummary],
         summary = read_summary(episode.dir_uri)
         if summary is None:
             raise DatasetWriteError(
-                f"staged episode {episode.dir_uri} is incomplete (no episode.json); re-run the conversion."
+                f"staged episode {episode.dir_uri} is incomplete (its episode.json is missing or cut short); "
+                "re-run the conversion (it stages the episode again)."
             )
         summaries.append(shared.summary(episode.apply(summary)))
         stamped.append(replace(episode, source_stamp=summary.source_stamp))

@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 import os
 import posixpath
+import tempfile
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -151,14 +152,25 @@ def write_json(uri: str, data: Any) -> None:
     text = json.dumps(data, indent=1, sort_keys=False)
     try:
         if is_local(fs):
-            partial = Path(f"{path}.partial-{os.getpid()}")
-            partial.write_text(text, encoding="utf-8")
-            partial.replace(path)
+            _replace_whole(Path(path), text)
         else:
             with fs.open(path, "w", encoding="utf-8") as handle:
                 handle.write(text)
     except ConnectionError as err:
         raise TransientError(f"{uri}: write failed ({err}); try again") from err
+
+
+def _replace_whole(path: Path, text: str) -> None:
+    """``text`` into a temporary file of its own beside ``path`` (two writers of one path never share
+    one), then renamed over ``path``; on failure the temporary file is removed."""
+    handle, partial = tempfile.mkstemp(prefix=f"{path.name}.partial-", dir=path.parent)
+    try:
+        with os.fdopen(handle, "w", encoding="utf-8") as out:
+            out.write(text)
+        Path(partial).replace(path)
+    except BaseException:
+        Path(partial).unlink(missing_ok=True)
+        raise
 
 
 def read_staged_table(uri: str) -> pa.Table:

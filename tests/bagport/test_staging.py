@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import fsspec
@@ -64,6 +65,18 @@ def test_a_json_write_killed_before_it_ends_leaves_no_file(
     with pytest.raises(KeyboardInterrupt):
         write_json(str(fresh), {"episode_id": "ep001", "frames": 3})
     assert not fresh.exists()  # no completion marker: the episode is converted again
+    assert list(fresh.parent.iterdir()) == []  # nor its temporary file
     with pytest.raises(KeyboardInterrupt):
         write_json(str(target), {"episode_id": "ep000", "frames": 4})
     assert json.loads(target.read_text()) == {"episode_id": "ep000", "frames": 3}  # the earlier one, whole
+    assert [p.name for p in target.parent.iterdir()] == [EPISODE_SUMMARY]
+
+
+def test_two_writers_of_one_json_path_do_not_share_a_temporary_file(tmp_path: Path) -> None:
+    """Threads of one process writing the same path (the thread runner) each write a whole file."""
+    target = tmp_path / "segments.json"
+    texts = [{"writer": i, "pad": "x" * 200_000} for i in range(8)]
+    with ThreadPoolExecutor(max_workers=8) as pool:
+        list(pool.map(lambda data: write_json(str(target), data), texts))
+    assert json.loads(target.read_text()) in texts
+    assert [p.name for p in tmp_path.iterdir()] == ["segments.json"]

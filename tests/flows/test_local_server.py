@@ -6,6 +6,7 @@ import contextlib
 import os
 import signal
 import socket
+import time
 import urllib.error
 import urllib.request
 from pathlib import Path
@@ -67,11 +68,37 @@ def test_a_server_that_dies_while_booting_is_reported_as_such() -> None:
     server = LocalServer(
         {"PREFECT_API_DATABASE_CONNECTION_URL": "nodriver://nowhere"}
     )  # the app cannot start
+    timeout_s = 120
+    started_s = time.monotonic()
     try:
         with pytest.raises(RuntimeError, match=r"exited \(code \d+\) before it was ready"):
-            server.wait_ready(60)
+            server.wait_ready(timeout_s)
+        assert time.monotonic() - started_s < timeout_s / 2  # at its exit, not at the timeout
     finally:
         server.stop()
+
+
+def test_a_fork_of_the_owner_holds_no_lifeline_and_never_stops_the_server() -> None:
+    """The CLI's forkserver is a fork of the CLI: the server must end with the CLI, not with the last
+    of its forks, and a fork's exit must not stop it."""
+    server = LocalServer()
+    try:
+        lifeline_w = server._lifeline_w
+        pid = os.fork()
+        if pid == 0:  # the fork: its copy of the write end closed, its copy of the server let go
+            code = 0
+            try:
+                os.fstat(lifeline_w)
+                code = 3
+            except OSError:
+                code = 0 if server._process is None else 4
+            os._exit(code)
+        _, status = os.waitpid(pid, 0)
+        assert os.waitstatus_to_exitcode(status) == 0
+        assert server._process is not None and server._process.poll() is None  # still the owner's
+        os.fstat(lifeline_w)  # and still open here
+    finally:
+        server.stop(graceful=False)
 
 
 @pytest.mark.slow

@@ -26,8 +26,8 @@ from bagport.config import ConvertConfig
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows import forkserver
 from flows.convert import run_config, run_convert
-from flows.local_server import LocalServer
-from flows.runners import WarmProcessPoolTaskRunner, prefect_api
+from flows.local_server import LocalServer, loopback_listener
+from flows.runners import ServerDownError, WarmProcessPoolTaskRunner, prefect_api
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
 BAGS = ("a", "b", "c")
@@ -173,13 +173,32 @@ def test_a_run_on_the_warm_pool_leaves_no_forkserver(tmp_path: Path, monkeypatch
     assert not [t for t in threading.enumerate() if t.name == "bagport-forkserver-stop"]
 
 
+def test_a_run_whose_server_is_down_leaves_no_forkserver(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The forkserver starts before the configured API is checked; a server that does not answer ends the
+    run there (one paragraph, exit 2), and the forkserver with it."""
+    with loopback_listener() as listener:  # a port nothing answers on once closed
+        dead_url = f"http://127.0.0.1:{listener.getsockname()[1]}/api"
+    monkeypatch.setenv("PREFECT_API_URL", dead_url)
+    write_episode_bag(tmp_path / BAGS[0], "mcap", EpisodeSpec(duration_s=0.3, seed=0))
+    config = ConvertConfig(
+        bags_glob=str(tmp_path / "*"), contract=str(SAMPLE_CONTRACT), output=str(tmp_path / "ds"),
+        encoder=FAST_CODEC, runner="process", workers=2,
+    )  # fmt: skip
+    with temporary_settings({PREFECT_API_URL: dead_url}), pytest.raises(ServerDownError):
+        run_convert(config)
+    assert not _forkservers()
+
+
 def test_the_cli_forks_its_forkserver_before_prefects_imports_against_a_running_server(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """With a configured API the flow starts once Prefect is imported: the forkserver is started before
     those imports (then its workers are ready for the first task runs); with a temporary server after
     them (the fork then has them); with nothing to convert or a single worker, never. The CLI's
-    forkserver is a fork of the CLI."""
+    forkserver is a fork of the CLI when it is the ``bagport`` program, not when ``main`` is called from
+    Python (a test, a script: forking that caller would copy whatever it holds)."""
     import flows.cli  # noqa: PLC0415 - the module under test
     import flows.convert  # noqa: PLC0415 - its entry is replaced below
     import flows.import_gc  # noqa: PLC0415 - its imports are recorded below
@@ -206,13 +225,20 @@ def test_the_cli_forks_its_forkserver_before_prefects_imports_against_a_running_
     )
     work, none = SimpleNamespace(requests=("a bag",)), SimpleNamespace(requests=())
     one_worker = config.model_copy(update={"workers": 1})  # a thread, no pool
-    for options, plan, server_up, expected in (
-        (config, work, True, ["forkserver fork=True", "imports", "flow"]),
-        (config, work, False, ["imports", "forkserver fork=True", "flow"]),
-        (config, none, True, ["imports", "flow"]),
-        (config, none, False, ["imports", "flow"]),
-        (one_worker, work, True, ["imports", "flow"]),
+    for options, plan, server_up, fork_cli, expected in (
+        (config, work, True, True, ["forkserver fork=True", "imports", "flow"]),
+        (config, work, False, True, ["imports", "forkserver fork=True", "flow"]),
+        (
+            config,
+            work,
+            False,
+            False,
+            ["imports", "forkserver fork=False", "flow"],
+        ),  # main() called from Python
+        (config, none, True, True, ["imports", "flow"]),
+        (config, none, False, True, ["imports", "flow"]),
+        (one_worker, work, True, True, ["imports", "flow"]),
     ):
         calls.clear()
-        flows.cli._run_flow(options, plan, False, server_up=server_up)  # type: ignore[arg-type]
-        assert calls == expected, (server_up, plan, options.workers)
+        flows.cli._run_flow(options, plan, False, server_up=server_up, fork_cli=fork_cli)  # type: ignore[arg-type]
+        assert calls == expected, (server_up, plan, options.workers, fork_cli)

@@ -4,11 +4,11 @@ from __future__ import annotations
 
 from bagport.bags.detect import detect_storage
 from bagport.bags.message import BagMessage
-from bagport.bags.reader import BagReader, open_bag, prepare_reading
+from bagport.bags.reader import BagReader, open_bag
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.stamp import source_stamp
 from bagport.bags.text import format_bag_info
-from bagport.bags.typesources import read_msg_path
+from bagport.bags.typesources import prepare_reading, read_msg_path
 from bagport.bags.window import BagWindow
 
 __all__ = [

@@ -40,7 +40,7 @@ from bagport.scratch import scratch_dir
 from bagport.uris import is_local
 from bagport.yamlsource import load_plain
 
-__all__ = ["BagReader", "open_bag", "prepare_reading"]
+__all__ = ["BagReader", "open_bag"]
 
 _HEADER = "std_msgs/msg/Header"
 _TIME = "builtin_interfaces/msg/Time"
@@ -372,16 +372,6 @@ def _open_ranged(
         remote.close()
         return None
     return RosbagsReader(uri, root, storage, None, remote, msg_definitions)
-
-
-def prepare_reading() -> None:
-    """Do once what a process's first bag open does first: import rosbags' ROS 2 and ROS 1 type stores and
-    parse bagport's bundled definitions (about 80 ms, then cached for the process). The pool's forkserver
-    calls it before forking its workers (``flows/worker_preload.py``), so no worker's first episode pays
-    it (W3: 164 -> 97 ms for a worker's first episode)."""
-    for store in (Stores.ROS2_HUMBLE, Stores.ROS1_NOETIC):
-        get_typestore(store)
-    parse_msg_definitions(BUNDLED_DEFINITIONS, "bagport's bundled types")
 
 
 def open_bag(

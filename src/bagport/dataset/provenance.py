@@ -41,9 +41,10 @@ def episode_provenance(s: EpisodeSummary, i: int) -> dict[str, Any]:
         staged = read_summary(s.dir_uri)
         if staged is None:
             raise DatasetWriteError(
-                f"the staged episode {s.dir_uri} (from {s.bag_uri}) is gone since this run selected it, so "
-                "its provenance cannot be written; nothing was published. Fix: re-run the conversion (it "
-                "stages the episode again), and keep other runs from cleaning this staging store meanwhile."
+                f"the staged episode {s.dir_uri} (from {s.bag_uri}) is gone or its episode.json unreadable "
+                "since this run selected it, so its provenance cannot be written; nothing was published. Fix: "
+                "re-run the conversion (it stages the episode again), and keep other runs from cleaning this "
+                "staging store meanwhile."
             )
         s = replace(s, alignment=staged.alignment, qa=staged.qa)
     return {

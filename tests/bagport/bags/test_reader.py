@@ -10,7 +10,7 @@ import pytest
 
 from bagport.bags import Storage, format_bag_info, open_bag
 from bagport.errors import BagReadError
-from tests.helpers import python_output, realbag
+from tests.helpers import realbag
 
 # (path under realbags, storage, messages) as the catalog lists them
 CATALOG = [
@@ -138,19 +138,3 @@ def test_files_are_read_by_content_whatever_their_name(tmp_path: Path, relative:
     with open_bag(str(source)) as original, open_bag(str(renamed)) as copy:
         assert copy.info.storage is original.info.storage
         assert copy.info.message_count == original.info.message_count
-
-
-_PREPARED_PROBE = """
-import sys
-from bagport.bags import prepare_reading
-stores = ("rosbags.typesys.stores.ros2_humble", "rosbags.typesys.stores.ros1_noetic")
-print(*(name in sys.modules for name in stores))
-prepare_reading()
-print(*(name in sys.modules for name in stores))
-"""
-
-
-def test_prepare_reading_builds_what_a_first_bag_open_needs(tmp_path: Path) -> None:
-    """What the pool's forkserver does before forking its workers: rosbags' type stores imported (a
-    fresh interpreter, so nothing else has imported them)."""
-    assert python_output(_PREPARED_PROBE, tmp_path / "home") == ["False", "False", "True", "True"]

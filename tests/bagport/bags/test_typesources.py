@@ -24,6 +24,7 @@ from bagport.run import plan_run, stage_all
 from bagport.staging import read_summary
 from flows.cli import main
 from tests.bagport.decode.bagwriter import write_bag
+from tests.helpers import python_output
 
 GRIPPER = "acme_msgs/msg/Gripper"
 GRIPPER_MSG = "std_msgs/Header header\nfloat64[3] gain\nint32 mode\ngeometry_msgs/Vector3 tip\n"
@@ -254,3 +255,19 @@ def test_msg_path_errors(tmp_path: Path) -> None:
     definitions = read_msg_path(str(tmp_path))
     with pytest.raises(BagReadError, match=r"definition of acme_msgs/msg/Broken cannot be parsed"):
         parse_msg_definitions(definitions)
+
+
+_PREPARED_PROBE = """
+import sys
+from bagport.bags import prepare_reading
+stores = ("rosbags.typesys.stores.ros2_humble", "rosbags.typesys.stores.ros1_noetic")
+print(*(name in sys.modules for name in stores))
+prepare_reading()
+print(*(name in sys.modules for name in stores))
+"""
+
+
+def test_prepare_reading_builds_what_a_first_bag_open_needs(tmp_path: Path) -> None:
+    """What the pool's forkserver does before forking its workers: rosbags' type stores imported (a
+    fresh interpreter, so nothing else has imported them)."""
+    assert python_output(_PREPARED_PROBE, tmp_path / "home") == ["False", "False", "True", "True"]

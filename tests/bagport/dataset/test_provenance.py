@@ -42,5 +42,5 @@ def test_a_lean_summary_whose_staged_episode_is_gone_is_an_error_not_an_empty_en
     assert summary is not None and summary.qa
     lean = replace(summary, alignment=[], qa={})  # as the reduce holds it
     assert episode_provenance(lean, 0)["qa"] == summary.qa  # read back from the staged episode
-    with pytest.raises(DatasetWriteError, match="is gone since this run selected it"):
+    with pytest.raises(DatasetWriteError, match=r"is gone or its episode\.json unreadable since this run"):
         episode_provenance(replace(lean, dir_uri=str(tmp_path / "gone")), 0)

@@ -14,16 +14,14 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from bagport.errors import BagportError
-from flows import cli_parser
-from flows.cli_config import convert_config
-from flows.cli_push import hf_token, push_from_args
+from flows.local_server import launch, take_launched
 
 if TYPE_CHECKING:
     import pydantic
 
     from bagport.config import ConvertConfig
     from bagport.dataset import DatasetReport
+    from bagport.errors import BagportError
     from bagport.run import RunPlan
 
 __all__ = ["build_parser", "main"]
@@ -64,17 +62,12 @@ def _progress_bar(done: int, total: int) -> None:
 
 
 def _cmd_convert(args: argparse.Namespace) -> int:
-    from flows.local_server import launch, take_launched  # noqa: PLC0415 - standard library only
-
-    server = launch()  # the temporary Prefect server boots while the imports below run
+    # the temporary Prefect server (main() launched it before the parser's imports) boots while the imports
+    # below run; main() kills it if the run ends without using it
+    server = launch()
     if not args.quiet and sys.stderr.isatty():  # something from the first second (start-up takes 5-13 s)
         print("starting: planning ...", end="", file=sys.stderr, flush=True)  # the bar overwrites it
-    try:
-        return _convert(args, throwaway_api=server is not None)
-    finally:
-        unused = take_launched()  # the run failed, or had nothing to do, before it needed the server
-        if unused is not None:
-            unused.stop(graceful=False)  # it served nothing: no waiting for its start-up to finish
+    return _convert(args, throwaway_api=server is not None)
 
 
 def _option_errors(err: pydantic.ValidationError) -> str:
@@ -97,9 +90,12 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
         import pydantic  # noqa: PLC0415
 
         from bagport.dataset.history import dataset_report  # noqa: PLC0415
+        from bagport.errors import BagportError  # noqa: PLC0415
         from bagport.qa import episode_ref  # noqa: PLC0415
         from bagport.reduce import finish_up_to_date, summary_json  # noqa: PLC0415
         from bagport.run import plan_run  # noqa: PLC0415
+        from flows.cli_config import convert_config  # noqa: PLC0415
+        from flows.cli_push import hf_token, push_from_args  # noqa: PLC0415
 
     try:
         config = convert_config(args, vars(build_parser().parse_args(["convert"])))
@@ -299,6 +295,7 @@ def _cmd_contract_check(args: argparse.Namespace) -> int:
 def _cmd_contract_init(args: argparse.Namespace) -> int:
     from bagport.bags import open_bag  # noqa: PLC0415
     from bagport.contract.draft import draft_contract  # noqa: PLC0415
+    from bagport.errors import BagportError  # noqa: PLC0415
 
     with open_bag(args.bag, msg_definitions=_msg_definitions(args)) as reader:
         text = draft_contract(reader.info, robot_type=args.robot_type, fps=args.fps)
@@ -337,6 +334,8 @@ def build_parser() -> argparse.ArgumentParser:
         "contract init": _cmd_contract_init,
         "synth": _cmd_synth,
     }
+    from flows import cli_parser  # noqa: PLC0415 - after a convert's temporary server is launched (main)
+
     return cli_parser.build_parser(handlers, _version())
 
 
@@ -358,23 +357,49 @@ def _episodes_failed(err: BagportError) -> bool:
     return isinstance(err, QualityError)  # by type: the error crossed the flow as the state's data
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """The ``bagport`` program (``argv`` ``None``: the command line's), or a call of it from Python."""
-    args = build_parser().parse_args(argv)
-    args.as_program = argv is None  # a process of its own: the pool's forkserver may be a fork of it
-    if getattr(args, "verbose", False):
-        os.environ["PREFECT_LOGGING_LEVEL"] = "INFO"  # before Prefect is imported: task and flow logs
-    elif getattr(args, "quiet", False):
+def _set_logging_env(*, verbose: bool, quiet: bool) -> None:
+    """Prefect's log levels for this process and the ones it starts, before Prefect is imported."""
+    if verbose:
+        os.environ["PREFECT_LOGGING_LEVEL"] = "INFO"  # task and flow logs
+    elif quiet:
         os.environ["PREFECT_LOGGING_LEVEL"] = "ERROR"
     else:
         os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
     # Prefect's console lines repeat what bagport prints once (a failing bag's message came 4-6 times);
     # they still reach the API (the UI's run logs). --verbose shows them (set, not defaulted: an earlier
     # in-process call may have turned them off in this environment, and child processes inherit it).
-    if getattr(args, "verbose", False):
+    if verbose:
         os.environ["PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL"] = "INFO"
     else:
         os.environ.setdefault("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "CRITICAL")
+
+
+def _launch_for_convert(argv: Sequence[str]) -> None:
+    """A ``convert`` command's temporary Prefect server (:func:`flows.local_server.launch`), started before
+    the parser's imports (0.1-0.3 s: its defaults come from bagport's pydantic models), as its boot is
+    what the run waits for first. The server's log levels follow ``--verbose``/``--quiet`` as written."""
+    if not argv or argv[0] != "convert" or {"-h", "--help"} & set(argv):
+        return
+    _set_logging_env(verbose="--verbose" in argv, quiet="--quiet" in argv)
+    launch()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """The ``bagport`` program (``argv`` ``None``: the command line's), or a call of it from Python."""
+    _launch_for_convert(sys.argv[1:] if argv is None else list(argv))
+    try:
+        return _run_command(build_parser().parse_args(argv), as_program=argv is None)
+    finally:
+        unused = take_launched()  # a command that failed (or had nothing to do) before it used the server
+        if unused is not None:
+            unused.stop(graceful=False)  # it served nothing: no waiting for its start-up to finish
+
+
+def _run_command(args: argparse.Namespace, *, as_program: bool) -> int:
+    from bagport.errors import BagportError  # noqa: PLC0415 - after a convert's server is launched (main)
+
+    args.as_program = as_program  # a process of its own: the pool's forkserver may be a fork of it
+    _set_logging_env(verbose=getattr(args, "verbose", False), quiet=getattr(args, "quiet", False))
     func: Callable[[argparse.Namespace], int] = args.func
     _install_crash_hook()
     try:

@@ -6,6 +6,11 @@ import threading
 from collections.abc import Sequence
 from typing import Any
 
+# Prefect imports these at a flow's first call, once its API answers (Flow.__call__ the task
+# visualisation, serialize_parameters FastAPI's encoder: 0.07-0.2 s): imported with this module, so a
+# CLI run imports them while its temporary server boots instead of after
+import fastapi.encoders  # noqa: F401
+import prefect.utilities.visualization  # noqa: F401
 from prefect import flow, get_run_logger
 from prefect.client.schemas.objects import State
 from prefect.futures import PrefectFuture, as_completed

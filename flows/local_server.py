@@ -21,8 +21,6 @@ import subprocess
 import sys
 import time
 import tomllib
-import urllib.error
-import urllib.request
 import weakref
 from collections.abc import Mapping
 from pathlib import Path
@@ -119,6 +117,9 @@ class LocalServer:
 
     def wait_ready(self, timeout_s: float) -> None:
         """Block until the API answers its health check; raises ``RuntimeError`` after ``timeout_s``."""
+        import urllib.error  # noqa: PLC0415 - not before launch(): the server starts first
+        import urllib.request  # noqa: PLC0415
+
         deadline = time.monotonic() + timeout_s
         while time.monotonic() < deadline:
             if self._process is None or self._process.poll() is not None:
@@ -188,6 +189,9 @@ class ServerUnreachableError(RuntimeError):
 
 def check_reachable(api_url: str, timeout_s: float = 10) -> None:
     """Raise :class:`ServerUnreachableError` unless ``api_url``/health answers."""
+    import urllib.error  # noqa: PLC0415 - not imported by launch()'s path
+    import urllib.request  # noqa: PLC0415
+
     try:
         with urllib.request.urlopen(f"{api_url.rstrip('/')}/health", timeout=timeout_s) as response:
             if response.status == 200:

@@ -64,6 +64,8 @@ class LocalServer:
             # offline, the telemetry service logs a red "Failed to send telemetry" ERROR (and once a
             # "database is locked" traceback) on every run: bagport's own throwaway server sends none
             "PREFECT_SERVER_ANALYTICS_ENABLED": "false",
+            # no browser reaches this loopback server (no UI): its clients send no CSRF token (flows/runners.py)
+            "PREFECT_SERVER_API_CSRF_PROTECTION_ENABLED": "false",
         }
         env.pop("PREFECT_API_URL", None)
         # the server's lifeline: it stops when this end closes, also when this process is killed

@@ -16,6 +16,7 @@ from prefect.events.worker import EventsWorker
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import (
     PREFECT_API_URL,
+    PREFECT_CLIENT_CSRF_SUPPORT_ENABLED,
     PREFECT_FLOWS_HEARTBEAT_FREQUENCY,
     get_current_settings,
     temporary_settings,
@@ -102,16 +103,20 @@ def _require_server(api_url: str) -> None:
 
 @contextmanager
 def _on_temporary_server() -> Iterator[None]:
-    """A run on bagport's temporary server: no flow-run heartbeats, and queued logs and events delivered
-    while the server still listens.
+    """A run on bagport's temporary server: no flow-run heartbeats, no CSRF tokens, and queued logs and
+    events delivered while the server still listens.
 
     Heartbeats let a server mark a flow run whose process died as crashed; the temporary server stops
     with the run (it has a lifeline, ``flows/local_server.py``), so nothing could ever watch them. They
-    cost a run up to 1 s at its end: Prefect joins their thread, which sleeps in 1 s steps. A configured
-    server (``PREFECT_API_URL``, a deployment) keeps them.
+    cost a run up to 1 s at its end: Prefect joins their thread, which sleeps in 1 s steps. The temporary
+    server checks no CSRF token (:class:`flows.local_server.LocalServer` turns that off: loopback, no
+    UI), so a client fetching one is a request for nothing, made by every client a task run creates.
+    A configured server (``PREFECT_API_URL``, a deployment) keeps both.
     """
     try:
-        with temporary_settings({PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None}):
+        with temporary_settings(
+            {PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None, PREFECT_CLIENT_CSRF_SUPPORT_ENABLED: False}
+        ):
             yield
     finally:
         APILogWorker.drain_all(timeout=10)

@@ -132,25 +132,37 @@ def _forkservers() -> list[psutil.Process]:
 
 
 @flow(name="bagport-test-heartbeats")
+@flow(name="bagport-noop")
+def _noop_flow() -> None:
+    """A flow to create a run of through the API."""
+
+
 def _heartbeat_seconds() -> int | None:
     """The flow-run heartbeat interval Prefect's flow engine reads (``None``: no heartbeats)."""
     return get_current_settings().flows.heartbeat_frequency
 
 
-def test_flow_runs_send_heartbeats_to_a_configured_server_only(monkeypatch: pytest.MonkeyPatch) -> None:
+def test_heartbeats_and_csrf_tokens_go_to_a_configured_server_only(monkeypatch: pytest.MonkeyPatch) -> None:
     """Nothing watches heartbeats on the temporary server, which stops with the run (and joining their
-    thread cost up to 1 s per run); a server the user configured keeps them, to mark dead runs crashed."""
+    thread cost up to 1 s per run), and it checks no CSRF token (loopback, no UI: fetching one was a
+    request per client for nothing), even where the environment turns servers' CSRF protection on; a
+    server the user configured keeps both (heartbeats mark dead runs crashed)."""
     monkeypatch.delenv("PREFECT_API_URL", raising=False)
+    monkeypatch.setenv("PREFECT_SERVER_API_CSRF_PROTECTION_ENABLED", "true")
     default = get_current_settings().flows.heartbeat_frequency
     assert default is not None
     with prefect_api():
         assert _heartbeat_seconds() is None
+        assert not get_current_settings().client.csrf_support_enabled
+        with get_client(sync_client=True) as client:  # a state-changing request, without a token
+            assert client.create_flow_run(_noop_flow).id is not None
     users = LocalServer()  # stands for the user's own server
     try:
         users.wait_ready(120)
         monkeypatch.setenv("PREFECT_API_URL", users.api_url)
         with temporary_settings({PREFECT_API_URL: users.api_url}), prefect_api():
             assert _heartbeat_seconds() == default
+            assert get_current_settings().client.csrf_support_enabled
             EventsWorker.drain_all(timeout=30)  # its heartbeat event, sent before that server stops
     finally:
         users.stop()

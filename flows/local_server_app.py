@@ -21,7 +21,8 @@ find nothing to do) and block-type registration (which imports every installed c
 which every run without ``PREFECT_API_URL`` waits for.
 
 Its API's routers are reordered (:func:`hot_routers_first`): those a conversion run calls come first, as
-the first request waits while FastAPI builds the route state of every router tried before its own.
+the first request waits while FastAPI builds the route state of every router tried before its own. Its
+settings are hashed once while the app is built (:func:`hashed_once`), not once per app cache.
 
 This module runs in the server's process (``uvicorn --factory flows.local_server_app:create_app``).
 """
@@ -32,8 +33,8 @@ import os
 import re
 import signal
 import sqlite3
-from collections.abc import AsyncGenerator
-from contextlib import asynccontextmanager, closing
+from collections.abc import AsyncGenerator, Iterator
+from contextlib import asynccontextmanager, closing, contextmanager
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -43,7 +44,7 @@ from prefect.context import refresh_global_settings_context
 from prefect.server.database.configurations import AioSqliteConfiguration
 from prefect.server.database.dependencies import set_database_config
 from prefect.server.utilities.database import get_dialect
-from prefect.settings import PREFECT_API_DATABASE_CONNECTION_URL
+from prefect.settings import PREFECT_API_DATABASE_CONNECTION_URL, Settings
 from sqlalchemy.engine import make_url
 from starlette.routing import Mount
 
@@ -55,7 +56,14 @@ if TYPE_CHECKING:
     from fastapi import FastAPI
     from sqlalchemy.ext.asyncio import AsyncSession, AsyncSessionTransaction
 
-__all__ = ["HOT_PREFIXES", "ImmediateSqliteConfiguration", "create_app", "hot_routers_first", "settled"]
+__all__ = [
+    "HOT_PREFIXES",
+    "ImmediateSqliteConfiguration",
+    "create_app",
+    "hashed_once",
+    "hot_routers_first",
+    "settled",
+]
 
 
 class ImmediateSqliteConfiguration(AioSqliteConfiguration):
@@ -175,6 +183,30 @@ def hot_routers_first(app: FastAPI) -> list[str]:
     return moved
 
 
+@contextmanager
+def hashed_once() -> Iterator[None]:
+    """Prefect's settings hashed once per settings object while the block runs.
+
+    Prefect's ``create_app`` and ``create_api_app`` each key an app cache by ``Settings.hash_key()``,
+    which serialises every setting (0.05-0.15 s each, a sixth to a quarter of building the app on the
+    path to the server's first answer); in this process both caches are empty and the settings are the
+    same object, so the second hash is the first one again.
+    """
+    original = Settings.hash_key
+    hashes: dict[int, tuple[Settings, str]] = {}  # by id, the object held so its id is not reused
+
+    def hash_key(settings: Settings) -> str:
+        if id(settings) not in hashes:
+            hashes[id(settings)] = (settings, original(settings))
+        return hashes[id(settings)][1]
+
+    Settings.hash_key = hash_key  # type: ignore[method-assign,assignment]
+    try:
+        yield
+    finally:
+        Settings.hash_key = original  # type: ignore[method-assign]
+
+
 def create_app() -> FastAPI:
     """Prefect's API app, on :class:`ImmediateSqliteConfiguration` when its database is SQLite, without
     the start-up work a :func:`settled` database does not need."""
@@ -195,7 +227,8 @@ def create_app() -> FastAPI:
         # the collection walks every object the imports made (the collector is paused through them,
         # flows/import_gc.py), 0.29 s of the boot the run waits for, to free nothing (the same peak RSS)
         os.environ.pop("PREFECT__SERVER_FINAL", None)
-    app = prefect_app()
+    with hashed_once():
+        app = prefect_app()
     hot_routers_first(app)
     resume()  # the collector, paused by the server's command line through these imports (flows/import_gc.py)
     return app

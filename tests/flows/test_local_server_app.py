@@ -112,6 +112,25 @@ def test_the_server_app_is_built_without_a_whole_heap_collection(tmp_path: Path)
     assert words[-1] == "0"
 
 
+_HASH_PROBE = """
+from prefect.server.api import server
+from prefect.settings import Settings, get_current_settings
+hashed = []
+hash_key = Settings.hash_key
+Settings.hash_key = lambda self: hashed.append(1) or hash_key(self)
+from flows.local_server_app import create_app
+app = create_app()
+key = get_current_settings().hash_key()
+print(len(hashed) - 1, [k[0] == key for k in server.APP_CACHE], [k[0] == key for k in server.API_APP_CACHE])
+"""
+
+
+def test_the_server_app_hashes_its_settings_once(tmp_path: Path) -> None:
+    """Prefect keys two app caches by the settings' hash (every setting serialised, each time): the
+    app is built with one, and both caches hold it under the settings' own hash."""
+    assert python_output(_HASH_PROBE, tmp_path / "home") == ["1", "[True]", "[True]"]
+
+
 _LIFESPAN_PROBE = """
 import asyncio, os, sys
 import prefect._internal.plugins.collections as collections

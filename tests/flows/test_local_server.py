@@ -78,7 +78,8 @@ def test_a_server_that_dies_while_booting_is_reported_as_such() -> None:
         server.stop()
 
 
-def test_a_fork_of_the_owner_holds_no_lifeline_and_never_stops_the_server() -> None:
+@pytest.mark.filterwarnings("ignore:This process .* is multi-threaded:DeprecationWarning")  # the child only
+def test_a_fork_of_the_owner_holds_no_lifeline_and_never_stops_the_server() -> None:  # checks and exits
     """The CLI's forkserver is a fork of the CLI: the server must end with the CLI, not with the last
     of its forks, and a fork's exit must not stop it."""
     server = LocalServer()

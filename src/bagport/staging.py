@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import os
 import posixpath
-import tempfile
+import threading
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +39,7 @@ __all__ = [
     "episode_dir",
     "read_staged_table",
     "read_summary",
+    "replace_whole",
     "staged_path",
     "write_json",
 ]
@@ -152,7 +153,7 @@ def write_json(uri: str, data: Any) -> None:
     text = json.dumps(data, indent=1, sort_keys=False)
     try:
         if is_local(fs):
-            _replace_whole(Path(path), text)
+            replace_whole(Path(path), text)
         else:
             with fs.open(path, "w", encoding="utf-8") as handle:
                 handle.write(text)
@@ -160,16 +161,16 @@ def write_json(uri: str, data: Any) -> None:
         raise TransientError(f"{uri}: write failed ({err}); try again") from err
 
 
-def _replace_whole(path: Path, text: str) -> None:
-    """``text`` into a temporary file of its own beside ``path`` (two writers of one path never share
-    one), then renamed over ``path``; on failure the temporary file is removed."""
-    handle, partial = tempfile.mkstemp(prefix=f"{path.name}.partial-", dir=path.parent)
+def replace_whole(path: Path, text: str) -> None:
+    """``text`` at the local ``path``, whole or not at all: written beside it under a name of this process
+    and thread (two writers of one path never share one; the file gets the usual permissions, as any
+    file this process creates), then renamed over it; on failure that file is removed."""
+    partial = path.with_name(f"{path.name}.partial-{os.getpid()}-{threading.get_ident()}")
     try:
-        with os.fdopen(handle, "w", encoding="utf-8") as out:
-            out.write(text)
-        Path(partial).replace(path)
+        partial.write_text(text, encoding="utf-8")
+        partial.replace(path)
     except BaseException:
-        Path(partial).unlink(missing_ok=True)
+        partial.unlink(missing_ok=True)
         raise
 
 

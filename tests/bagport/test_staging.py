@@ -80,3 +80,13 @@ def test_two_writers_of_one_json_path_do_not_share_a_temporary_file(tmp_path: Pa
         list(pool.map(lambda data: write_json(str(target), data), texts))
     assert json.loads(target.read_text()) in texts
     assert [p.name for p in tmp_path.iterdir()] == ["segments.json"]
+
+
+def test_a_json_file_gets_the_permissions_of_any_file_this_process_writes(tmp_path: Path) -> None:
+    """Written through a temporary file, but readable as a plainly written one is (another user's process
+    on the host may read a local staging store)."""
+    plain = tmp_path / "plain.json"
+    plain.write_text("{}")
+    staged = tmp_path / "episode.json"
+    write_json(str(staged), {})
+    assert staged.stat().st_mode == plain.stat().st_mode

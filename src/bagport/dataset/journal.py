@@ -26,6 +26,7 @@ from typing import Any, Literal
 from fsspec import AbstractFileSystem
 
 from bagport.dataset.layout import JOURNAL_PATH
+from bagport.staging import replace_whole
 from bagport.uris import is_local
 
 __all__ = ["Journal", "file_sha256", "read_journal", "remove_journal", "write_journal"]
@@ -69,9 +70,7 @@ def write_journal(fs: AbstractFileSystem, root: str, journal: Journal) -> None:
     """Write (or replace, in one request/rename) the record of the dataset at ``root``."""
     path = f"{root}/{JOURNAL_PATH}"
     if is_local(fs):
-        tmp = Path(f"{path}.tmp")
-        tmp.write_text(journal.to_json())
-        tmp.replace(path)  # atomic: the record is either the old or the new one
+        replace_whole(Path(path), journal.to_json())  # atomic: the record is either the old or the new one
     else:
         fs.pipe_file(path, journal.to_json().encode())
 

@@ -139,7 +139,8 @@ def dask_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
                 "n_workers": workers,
                 "threads_per_worker": 1,
                 "processes": True,
-                "dashboard_address": None,
+                "dashboard_address": None,  # no dashboard; its HTTP server (health, metrics) on a free port,
+                "scheduler_kwargs": {"dashboard_address": ":0"},  # not 8787: two runs on one host both start
             }
         )
     return runner

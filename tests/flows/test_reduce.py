@@ -81,7 +81,11 @@ def test_output_files_are_written_by_tasks_on_two_dask_workers(tmp_path: Path) -
     # one CLI run per cluster: its workers keep the first run's (temporary) Prefect API
     with (
         LocalCluster(  # type: ignore[no-untyped-call]
-            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            scheduler_kwargs={"dashboard_address": ":0"},  # not 8787: another test's cluster may run
         ) as cluster,
         Client(cluster) as client,  # type: ignore[no-untyped-call]
     ):

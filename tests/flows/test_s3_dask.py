@@ -4,8 +4,10 @@ loaded by LeRobot; the credentials appear in no output, log, dataset or staged o
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -45,7 +47,11 @@ def test_s3_bags_staging_and_output_on_an_existing_dask_cluster(
     monkeypatch.setenv("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "INFO")
     with (
         LocalCluster(  # type: ignore[no-untyped-call]
-            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None
+            n_workers=2,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            scheduler_kwargs={"dashboard_address": ":0"},  # not 8787: another test's cluster may run
         ) as cluster,
         Client(cluster) as client,  # type: ignore[no-untyped-call]
     ):
@@ -118,6 +124,7 @@ def test_dask_runner_starts_a_local_cluster_or_connects_to_an_address() -> None:
         "threads_per_worker": 1,
         "processes": True,
         "dashboard_address": None,
+        "scheduler_kwargs": {"dashboard_address": ":0"},
     }
     config = ConvertConfig(
         manifest="m.yaml", contract="c.yaml", output="out", runner="dask", dask_address="tcp://h:8786"
@@ -133,7 +140,20 @@ def test_the_flow_starts_its_own_local_dask_cluster(tmp_path: Path) -> None:
     for seed in (1, 2):
         write_episode_bag(tmp_path / f"bags/ep{seed}", "mcap", EpisodeSpec(duration_s=1.0, seed=seed))
     env = {**os.environ, "PREFECT_LOGGING_LEVEL": "INFO"}
-    proc = subprocess.run(
+    with socket.socket() as dask_default_port:  # another run's cluster on Dask's default port 8787
+        with contextlib.suppress(OSError):  # a process of the machine's has it: as good
+            dask_default_port.bind(("127.0.0.1", 8787))
+            dask_default_port.listen()
+        proc = _convert_on_own_cluster(tmp_path, env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    logs = proc.stdout + proc.stderr
+    assert "Creating a new Dask cluster with `distributed.deploy.local.LocalCluster`" in logs
+    assert "already in use" not in logs  # the cluster took a free port, not 8787, without a warning
+    assert validate_dataset(tmp_path / "ds", repo_id="test/dask-local").episodes == 2
+
+
+def _convert_on_own_cluster(tmp_path: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
         [
             sys.executable, "-m", "flows.cli", "convert",
             "--glob", str(tmp_path / "bags/*"),
@@ -143,7 +163,3 @@ def test_the_flow_starts_its_own_local_dask_cluster(tmp_path: Path) -> None:
         ],
         capture_output=True, text=True, check=False, cwd=REPO, env=env,
     )  # fmt: skip
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    logs = proc.stdout + proc.stderr
-    assert "Creating a new Dask cluster with `distributed.deploy.local.LocalCluster`" in logs
-    assert validate_dataset(tmp_path / "ds", repo_id="test/dask-local").episodes == 2

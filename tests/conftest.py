@@ -17,6 +17,31 @@ os.environ.setdefault("PREFECT_SERVER_ANALYTICS_ENABLED", "false")
 os.environ.setdefault("PREFECT_LOGGING_LEVEL", "WARNING")
 os.environ.setdefault("HF_HOME", str(REPO / ".prefect" / "hf"))
 os.environ["HF_HUB_OFFLINE"] = "1"
+if worker := os.environ.get("PYTEST_XDIST_WORKER"):  # `make test` runs two workers (pytest-xdist)
+    # each its own Prefect home: the temporary server's SQLite database and the profiles, not shared
+    os.environ["PREFECT_HOME"] = str(Path(os.environ["PREFECT_HOME"]) / worker)
+
+# The modules with end-to-end runs first: under xdist, a long module left for the end would run while the
+# other worker idles (the bagport/ unit tests, short, fill the gaps at the end).
+_DIRECTORY_ORDER = ("stack", "flows", "bench", "docker")
+
+
+def _module_rank(item: pytest.Item, slow_modules: set[Path]) -> tuple[int, bool]:
+    parts = item.path.relative_to(REPO / "tests").parts
+    directory = _DIRECTORY_ORDER.index(parts[0]) if parts[0] in _DIRECTORY_ORDER else len(_DIRECTORY_ORDER)
+    return directory, item.path not in slow_modules
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's own hook reads the groups
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Each module's tests form one xdist group (``--dist loadgroup``): one worker runs them all, so its
+    module fixtures are built once. A module whose tests share something with another module's names its
+    group itself (``pytest.mark.xdist_group``); the modules with slow tests go first."""
+    slow_modules = {item.path for item in items if item.get_closest_marker("slow") is not None}
+    for item in items:
+        if item.get_closest_marker("xdist_group") is None:
+            item.add_marker(pytest.mark.xdist_group(str(item.path.relative_to(REPO / "tests"))))
+    items.sort(key=lambda item: _module_rank(item, slow_modules))
 
 
 @pytest.fixture(scope="module")

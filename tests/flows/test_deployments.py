@@ -207,6 +207,7 @@ def test_scheduled_ingestion_appends_only_new_bags(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time under xdist
 def test_a_deployment_runs_on_ray(tmp_path: Path) -> None:
     """The reconvert flow given a config as a deployment's JSON parameter (runner ray, no address: a local
     instance of `workers` CPUs), in a process of its own as a worker runs it."""

@@ -74,6 +74,7 @@ def test_runner_ray_without_the_extra_says_how_to_install(monkeypatch: pytest.Mo
 
 
 @pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time under xdist
 def test_convert_on_a_local_ray_instance(tmp_path: Path) -> None:
     bags = tmp_path / "bags"
     assert main(["synth", "--out", str(bags), "--episodes", str(EPISODES), "--duration", "1"]) == 0

@@ -31,6 +31,7 @@ from flows.import_gc import SERVER_PREAMBLE
 __all__ = [
     "LIFELINE_ENV",
     "LocalServer",
+    "ServerStartError",
     "ServerUnreachableError",
     "api_configured",
     "check_reachable",
@@ -68,6 +69,7 @@ class LocalServer:
             "PREFECT_SERVER_API_CSRF_PROTECTION_ENABLED": "false",
         }
         env.pop("PREFECT_API_URL", None)
+        self._prefect_home = env.get("PREFECT_HOME", "~/.prefect")
         # the server's lifeline: it stops when this end closes, also when this process is killed
         # (SIGKILL, the OOM killer) and stop() never runs (flows/local_server_app.py)
         lifeline_r, self._lifeline_w = os.pipe()
@@ -118,7 +120,8 @@ class LocalServer:
         return self._process.pid
 
     def wait_ready(self, timeout_s: float) -> None:
-        """Block until the API answers its health check; raises ``RuntimeError`` after ``timeout_s``."""
+        """Block until the API answers its health check; raises :class:`ServerStartError` if the server
+        exits first or ``timeout_s`` passes."""
         import urllib.error  # noqa: PLC0415 - not before launch(): the server starts first
         import urllib.request  # noqa: PLC0415
 
@@ -126,7 +129,11 @@ class LocalServer:
         while time.monotonic() < deadline:
             if self._process is None or self._process.poll() is not None:
                 code = None if self._process is None else self._process.returncode
-                raise RuntimeError(f"the temporary Prefect server exited (code {code}) before it was ready")
+                raise ServerStartError(
+                    f"the temporary Prefect server exited (code {code}) before it was ready (its own message "
+                    f"is above); it keeps its database in PREFECT_HOME ({self._prefect_home}): make that a "
+                    "folder this user can write, or point PREFECT_API_URL at a running Prefect server"
+                )
             try:
                 # the listener is bound already: the request waits for the app, however long it boots
                 # (with 2 s, a boot of 2.1 s on a busy VM took a retry), and a server that dies resets it
@@ -137,7 +144,7 @@ class LocalServer:
             except (urllib.error.URLError, ConnectionError, TimeoutError):
                 pass
             time.sleep(0.1)
-        raise RuntimeError(
+        raise ServerStartError(
             f"the temporary Prefect server did not answer within {timeout_s:g} s; "
             "set PREFECT_SERVER_EPHEMERAL_STARTUP_TIMEOUT_SECONDS higher on a slow machine, "
             "or point PREFECT_API_URL at a running server"
@@ -183,6 +190,11 @@ def loopback_listener() -> socket.socket:
 
 
 _launched: LocalServer | None = None
+
+
+class ServerStartError(RuntimeError):
+    """The temporary server exited, or did not answer in time, before it was ready (the CLI turns it into
+    one paragraph and exit 2)."""
 
 
 class ServerUnreachableError(RuntimeError):

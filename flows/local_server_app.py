@@ -207,6 +207,22 @@ def hashed_once() -> Iterator[None]:
         Settings.hash_key = original  # type: ignore[method-assign]
 
 
+def _make_database_folder(connection_url: str) -> None:
+    """The SQLite database's folder (``PREFECT_HOME`` by default), made when missing: SQLite creates the
+    file, not its folder, and the server would exit on "unable to open database file" with a traceback.
+    A folder that cannot be made is one line on stderr and exit code 1 (the CLI says what to do)."""
+    database = make_url(connection_url).database
+    if not database or database == ":memory:":
+        return
+    folder = Path(database).expanduser().parent
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise SystemExit(
+            f"the temporary Prefect server cannot make its database's folder {folder}: {err}"
+        ) from None
+
+
 def create_app() -> FastAPI:
     """Prefect's API app, on :class:`ImmediateSqliteConfiguration` when its database is SQLite, without
     the start-up work a :func:`settled` database does not need."""
@@ -217,6 +233,7 @@ def create_app() -> FastAPI:
 
     connection_url = PREFECT_API_DATABASE_CONNECTION_URL.value()
     if get_dialect(connection_url).name == "sqlite":
+        _make_database_folder(connection_url)
         set_database_config(ImmediateSqliteConfiguration(connection_url=connection_url))
         if settled(connection_url):
             os.environ.update(SETTLED_SKIPS)  # this process is the server's own: nothing else reads them

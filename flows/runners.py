@@ -27,7 +27,13 @@ from bagport.config import ConvertConfig
 from bagport.errors import BagportError
 from flows import forkserver
 from flows.lifeline import when_cut
-from flows.local_server import LocalServer, ServerUnreachableError, check_reachable, take_launched
+from flows.local_server import (
+    LocalServer,
+    ServerStartError,
+    ServerUnreachableError,
+    check_reachable,
+    take_launched,
+)
 
 __all__ = [
     "RayMissingError",
@@ -56,7 +62,7 @@ def prefect_api() -> Iterator[None]:
                 refresh_global_settings_context()  # Prefect imported before launch() set the URL (in-process CLI)
             # the run's settings are built while the server boots (0.06 s of pydantic-settings), not after
             with _on_temporary_server():
-                launched.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
+                _wait_ready(launched)
                 yield
         finally:
             launched.stop()
@@ -71,7 +77,7 @@ def prefect_api() -> Iterator[None]:
     server = LocalServer(get_current_settings().to_environment_variables(exclude_unset=True))
     previous = os.environ.get("PREFECT_API_URL")
     try:
-        server.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
+        _wait_ready(server)
         os.environ["PREFECT_API_URL"] = server.api_url
         # threads Prefect starts outside any settings context (the process pool's message forwarder, which
         # sends the workers' events) read Prefect's global settings, taken from the environment when Prefect
@@ -90,7 +96,16 @@ def prefect_api() -> Iterator[None]:
 
 
 class ServerDownError(BagportError):
-    """The configured Prefect API does not answer."""
+    """The Prefect API does not answer: the configured one, or bagport's temporary server, which did not
+    start."""
+
+
+def _wait_ready(server: LocalServer) -> None:
+    """The temporary server's health check; one that exits or never answers is one paragraph (exit 2)."""
+    try:
+        server.wait_ready(get_current_settings().server.ephemeral.startup_timeout_seconds)
+    except ServerStartError as err:
+        raise ServerDownError(str(err)) from None
 
 
 def _require_server(api_url: str) -> None:

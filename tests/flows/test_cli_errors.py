@@ -42,6 +42,29 @@ def test_missing_bag_uri(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> N
     assert not (tmp_path / "out").exists()
 
 
+def test_a_prefect_home_the_server_cannot_make_is_one_paragraph(tmp_path: Path) -> None:
+    """The temporary server cannot make its database's folder (PREFECT_HOME under a file): the server's one
+    line and the CLI's paragraph (what to set), exit code 2, no traceback; nothing written."""
+    write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=0.3))
+    (tmp_path / "a-file").write_text("")
+    env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
+    env["PREFECT_HOME"] = str(tmp_path / "a-file" / "prefect")
+    done = subprocess.run(
+        [sys.executable, "-m", "flows.cli", "convert", "--glob", str(tmp_path / "ep"),
+         "--contract", str(SAMPLE_CONTRACT), "--output", str(tmp_path / "out")],
+        capture_output=True, text=True, check=False, cwd=REPO, env=env, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 2, done.stderr[-3000:]
+    assert "Traceback" not in done.stderr
+    assert f"cannot make its database's folder {tmp_path / 'a-file' / 'prefect'}" in done.stderr
+    assert (
+        "bagport convert: error: the temporary Prefect server exited (code 1) before it was ready"
+        in done.stderr
+    )
+    assert f"PREFECT_HOME ({tmp_path / 'a-file' / 'prefect'}): make that a folder" in done.stderr
+    assert not (tmp_path / "out").exists()
+
+
 def test_malformed_contract(tmp_path: Path, capfd: pytest.CaptureFixture[str]) -> None:
     write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=0.3))
     manifest = tmp_path / "m.yaml"

@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from flows import local_server
-from flows.local_server import LocalServer, api_configured
+from flows.local_server import LocalServer, ServerStartError, api_configured
 
 
 @pytest.fixture
@@ -62,6 +62,18 @@ def test_an_api_in_project_settings_is_used(no_prefect_config: Path, name: str, 
     assert api_configured()
 
 
+def test_the_server_makes_a_missing_prefect_home_for_its_database(tmp_path: Path) -> None:
+    """SQLite makes the database file, not its folder: a fresh machine's PREFECT_HOME (or a new one set for
+    a job) does not exist yet."""
+    home = tmp_path / "new" / "prefect-home"
+    server = LocalServer({"PREFECT_HOME": str(home)})
+    try:
+        server.wait_ready(120)
+    finally:
+        server.stop()
+    assert (home / "prefect.db").is_file()
+
+
 def test_a_server_that_dies_while_booting_is_reported_as_such() -> None:
     """Its health check waits on the bound listener for as long as the boot takes, and a server that exits
     meanwhile ends the wait at once (its connection is reset), not at the timeout."""
@@ -71,7 +83,7 @@ def test_a_server_that_dies_while_booting_is_reported_as_such() -> None:
     timeout_s = 120
     started_s = time.monotonic()
     try:
-        with pytest.raises(RuntimeError, match=r"exited \(code \d+\) before it was ready"):
+        with pytest.raises(ServerStartError, match=r"exited \(code \d+\) before it was ready"):
             server.wait_ready(timeout_s)
         assert time.monotonic() - started_s < timeout_s / 2  # at its exit, not at the timeout
     finally:

@@ -20,6 +20,8 @@ os.environ["HF_HUB_OFFLINE"] = "1"
 if worker := os.environ.get("PYTEST_XDIST_WORKER"):  # `make test` runs two workers (pytest-xdist)
     # each its own Prefect home: the temporary server's SQLite database and the profiles, not shared
     os.environ["PREFECT_HOME"] = str(Path(os.environ["PREFECT_HOME"]) / worker)
+    # Prefect makes its home without its parents (a warning in a fresh clone, where .prefect is missing)
+    Path(os.environ["PREFECT_HOME"]).mkdir(parents=True, exist_ok=True)
 
 # The modules with end-to-end runs first: under xdist, a long module left for the end would run while the
 # other worker idles (the bagport/ unit tests, short, fill the gaps at the end).

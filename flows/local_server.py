@@ -14,6 +14,7 @@ This module imports no Prefect code: ``flows.cli`` calls :func:`launch` before a
 from __future__ import annotations
 
 import atexit
+import contextlib
 import importlib.util
 import os
 import socket
@@ -70,6 +71,10 @@ class LocalServer:
         }
         env.pop("PREFECT_API_URL", None)
         self._prefect_home = env.get("PREFECT_HOME", "~/.prefect")
+        # made with its parents (Prefect makes only the last folder, and warns at its import when it cannot);
+        # one that cannot be made is the server's to report (its database is there)
+        with contextlib.suppress(OSError):
+            Path(self._prefect_home).expanduser().mkdir(parents=True, exist_ok=True)
         # the server's lifeline: it stops when this end closes, also when this process is killed
         # (SIGKILL, the OOM killer) and stop() never runs (flows/local_server_app.py)
         lifeline_r, self._lifeline_w = os.pipe()

@@ -67,11 +67,19 @@ def test_the_server_makes_a_missing_prefect_home_for_its_database(tmp_path: Path
     a job) does not exist yet."""
     home = tmp_path / "new" / "prefect-home"
     server = LocalServer({"PREFECT_HOME": str(home)})
+    assert home.is_dir()  # before Prefect's import in this process: it would warn, unable to make it
     try:
         server.wait_ready(120)
     finally:
         server.stop()
     assert (home / "prefect.db").is_file()
+    database = tmp_path / "elsewhere" / "prefect.db"  # a configured SQLite file: the server makes its folder
+    server = LocalServer({"PREFECT_API_DATABASE_CONNECTION_URL": f"sqlite+aiosqlite:///{database}"})
+    try:
+        server.wait_ready(120)
+    finally:
+        server.stop()
+    assert database.is_file()
 
 
 def test_a_server_that_dies_while_booting_is_reported_as_such() -> None:

@@ -131,12 +131,12 @@ def _forkservers() -> list[psutil.Process]:
     return [p for p in psutil.Process().children() if "forkserver" in " ".join(p.cmdline())]
 
 
-@flow(name="bagport-test-heartbeats")
 @flow(name="bagport-noop")
 def _noop_flow() -> None:
     """A flow to create a run of through the API."""
 
 
+@flow(name="bagport-test-heartbeats")
 def _heartbeat_seconds() -> int | None:
     """The flow-run heartbeat interval Prefect's flow engine reads (``None``: no heartbeats)."""
     return get_current_settings().flows.heartbeat_frequency

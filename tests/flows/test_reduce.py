@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 import pyarrow.parquet as pq
 import pytest
-from distributed import Client, LocalCluster, get_task_stream
+from distributed import get_task_stream
 from prefect.client.orchestration import get_client
 from prefect.client.schemas.filters import FlowRunFilter, FlowRunFilterId
 from prefect.client.schemas.sorting import FlowRunSort
@@ -28,6 +28,7 @@ from bagport.dataset.validate import video_backend
 from bagport.synth import EpisodeSpec, GroundTruth, write_episode_bag
 from flows.convert import run_config
 from flows.runners import prefect_api
+from tests.dask_cluster import dask_cluster
 from tests.fsprobe import watch_opens
 from tests.helpers import FAST_CODEC, REPO, SAMPLE_CONTRACT
 
@@ -79,21 +80,12 @@ def test_output_files_are_written_by_tasks_on_two_dask_workers(tmp_path: Path) -
     old = sorted(p for d in ("data", "videos") for p in (tmp_path / "ds" / d).rglob("*") if p.is_file())
     assert len(old) == 6  # per episode: a data file (above 1 kB each) and a video file per camera
     # one CLI run per cluster: its workers keep the first run's (temporary) Prefect API
-    with (
-        LocalCluster(  # type: ignore[no-untyped-call]
-            n_workers=2,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            scheduler_kwargs={"dashboard_address": ":0"},  # not 8787: another test's cluster may run
-        ) as cluster,
-        Client(cluster) as client,  # type: ignore[no-untyped-call]
-    ):
+    with dask_cluster() as (scheduler_address, client):
         workers = client.run(os.getpid)
         with get_task_stream(client) as stream, watch_opens(old) as opens:
             appended = _convert(
                 tmp_path, ["ep0", "ep1", "ep2", "ep3"], "--append", "--runner", "dask", "--dask-address",
-                cluster.scheduler_address,
+                scheduler_address,
             )  # fmt: skip
     assert appended.returncode == 0, appended.stderr[-3000:]
     # the two new data files and each camera's two new video files: one task each, on the workers

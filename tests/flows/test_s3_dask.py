@@ -14,12 +14,13 @@ from pathlib import Path
 
 import pytest
 import s3fs
-from distributed import Client, LocalCluster, get_task_stream
+from distributed import get_task_stream
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.synth import EpisodeSpec, write_episode_bag
 from flows.runners import dask_runner
+from tests.dask_cluster import dask_cluster
 from tests.helpers import REPO, SAMPLE_CONTRACT
 from tests.s3 import KEY_ID, SECRET
 
@@ -45,16 +46,7 @@ def test_s3_bags_staging_and_output_on_an_existing_dask_cluster(
     # to this process's stderr, where capfd reads them.
     monkeypatch.setenv("PREFECT_LOGGING_LEVEL", "INFO")
     monkeypatch.setenv("PREFECT_LOGGING_HANDLERS_CONSOLE_LEVEL", "INFO")
-    with (
-        LocalCluster(  # type: ignore[no-untyped-call]
-            n_workers=2,
-            threads_per_worker=1,
-            processes=True,
-            dashboard_address=None,
-            scheduler_kwargs={"dashboard_address": ":0"},  # not 8787: another test's cluster may run
-        ) as cluster,
-        Client(cluster) as client,  # type: ignore[no-untyped-call]
-    ):
+    with dask_cluster() as (scheduler_address, client):
         workers = client.run(os.getpid)  # worker address -> pid
         env = {**os.environ, **s3_env, "BAGPORT_DEBUG": "0"}
         with get_task_stream(client) as stream:
@@ -65,12 +57,12 @@ def test_s3_bags_staging_and_output_on_an_existing_dask_cluster(
                     "--contract", str(SAMPLE_CONTRACT),
                     "--output", "s3://fleet/datasets/sample",
                     "--staging", "s3://fleet/staging",
-                    "--runner", "dask", "--dask-address", cluster.scheduler_address,
+                    "--runner", "dask", "--dask-address", scheduler_address,
                     "--keep-staging", "--verbose",
                 ],
                 capture_output=True, text=True, check=False, cwd=REPO, env=env,
             )  # fmt: skip
-        worker_logs = json.dumps(client.get_worker_logs()).encode()
+        worker_logs = json.dumps(client.get_worker_logs()).encode()  # type: ignore[no-untyped-call]
     assert proc.returncode == 0, proc.stderr[-3000:]
     # Both episodes ran as tasks on the cluster's worker processes, not in the CLI's process.
     ran = [t for t in stream.data if str(t["key"]).startswith("convert_episode_task-")]

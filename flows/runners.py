@@ -154,8 +154,10 @@ def dask_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
                 "n_workers": workers,
                 "threads_per_worker": 1,
                 "processes": True,
-                "dashboard_address": None,  # no dashboard; its HTTP server (health, metrics) on a free port,
-                "scheduler_kwargs": {"dashboard_address": ":0"},  # not 8787: two runs on one host both start
+                # no dashboard, and the scheduler's HTTP endpoint (health, metrics) on a free port rather
+                # than Dask's 8787, which a second run on the host would find taken
+                "dashboard_address": None,
+                "scheduler_kwargs": {"dashboard_address": ":0"},
             }
         )
     return runner

@@ -14,6 +14,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from flows.console import outlive_closed_output
 from flows.local_server import launch, take_launched
 
 if TYPE_CHECKING:
@@ -386,6 +387,8 @@ def _launch_for_convert(argv: Sequence[str]) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """The ``bagport`` program (``argv`` ``None``: the command line's), or a call of it from Python."""
+    if argv is None:  # the program: a closed stdout or stderr must not stop its run (flows/console.py)
+        outlive_closed_output()
     _launch_for_convert(sys.argv[1:] if argv is None else list(argv))
     try:
         return _run_command(build_parser().parse_args(argv), as_program=argv is None)

@@ -19,7 +19,9 @@ Generated from the `bagport` argument parser (`make docs` runs `flows/cli_refere
 command, every option, its default. Errors print as one paragraph (what, where, how to fix);
 `BAGPORT_DEBUG=1` shows the traceback. Exit codes: **0** everything converted (or passed QA);
 **1** some episodes were excluded or failed as the QA policy says, or `--fail-fast` stopped the run;
-**2** usage or input error, nothing written.
+**2** usage or input error, nothing written. A run outlives its console: when the reader of its output
+goes away (`bagport convert ... | head`, a `tee` or log shipper that dies), it drops what it would have
+printed and goes on to its dataset and its own exit code (the logs are still on the Prefect server).
 """
 
 

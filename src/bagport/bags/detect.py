@@ -6,10 +6,10 @@ from pathlib import Path
 
 import yaml
 
+from bagport.bags.metadata_yaml import parse_metadata
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
-from bagport.yamlsource import load_plain
 
 __all__ = ["detect_storage"]
 
@@ -59,7 +59,7 @@ def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
     metadata = path / "metadata.yaml"
     if metadata.is_file():
         try:
-            info = load_plain(metadata.read_text()) or {}
+            info = parse_metadata(metadata.read_text()) or {}
             storage_id = str(info.get("rosbag2_bagfile_information", {}).get("storage_identifier", ""))
         except (yaml.YAMLError, OSError, AttributeError) as err:
             raise BagReadError(

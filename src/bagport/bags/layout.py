@@ -17,10 +17,10 @@ from typing import Any
 
 import yaml
 
+from bagport.bags.metadata_yaml import parse_metadata
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
-from bagport.yamlsource import load_plain
 
 __all__ = ["ReadPlan", "plan_reads"]
 
@@ -67,7 +67,7 @@ def _metadata(folder: BagPath, uri: str) -> dict[str, Any] | None:
     if not metadata.is_file():
         return None
     try:
-        info = load_plain(metadata.read_text()) or {}
+        info = parse_metadata(metadata.read_text()) or {}
         return dict(info.get("rosbag2_bagfile_information") or {})
     except (yaml.YAMLError, OSError, AttributeError, TypeError, ValueError) as err:
         raise BagReadError(

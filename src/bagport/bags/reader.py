@@ -24,6 +24,7 @@ from bagport.bags.detect import detect_storage
 from bagport.bags.indexcount import window_counts
 from bagport.bags.layout import BagPath, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
+from bagport.bags.metadata_yaml import parse_metadata
 from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
@@ -38,7 +39,6 @@ from bagport.errors import BagportError, BagReadError, TransientError
 from bagport.msgtypes import RosType, global_topic, normalize_msgtype
 from bagport.scratch import scratch_dir
 from bagport.uris import is_local
-from bagport.yamlsource import load_plain
 
 __all__ = ["BagReader", "open_bag"]
 
@@ -84,7 +84,7 @@ def _custom_data(path: BagPath) -> dict[str, str]:
     if metadata is None or not metadata.is_file():
         return {}
     try:
-        info = load_plain(metadata.read_text()) or {}
+        info = parse_metadata(metadata.read_text()) or {}
         data = info.get("rosbag2_bagfile_information", {}).get("custom_data") or {}
     except (yaml.YAMLError, OSError, AttributeError):
         return {}

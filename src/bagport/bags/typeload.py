@@ -36,9 +36,12 @@ from rosbags.rosbag2.reader import DirectoryReader
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.base import TypesysError
 
+from bagport.bags.metadata_yaml import serve_rosbags
 from bagport.msgtypes import normalize_msgtype
 
 __all__ = ["TolerantAnyReader", "is_placeholder", "is_service_event", "one_line"]
+
+serve_rosbags()  # rosbags' folder reader parses metadata.yaml once with bagport's reads of it
 
 _IDL_SEPARATOR = "=" * 80 + "\n"
 _SERVICE_EVENT = re.compile(r"(/_service_event$)|(/srv/\w+_Event$)")

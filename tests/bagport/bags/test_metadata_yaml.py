@@ -1,0 +1,58 @@
+"""metadata.yaml is parsed once per bag open, rosbags' folder reader included, as ruamel parsed it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import rosbags.rosbag2.reader
+from rosbags.rosbag2 import Reader, ReaderError
+from ruamel.yaml import YAML
+
+from bagport.bags import metadata_yaml, open_bag
+from bagport.bags.metadata_yaml import RosbagsMetadataYAML, parse_metadata
+from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import REALBAGS
+
+REAL_METADATA = sorted(REALBAGS.glob("**/metadata.yaml"))
+
+
+@pytest.mark.parametrize("path", REAL_METADATA, ids=lambda p: str(p.relative_to(REALBAGS).parent))
+def test_real_metadata_parses_as_ruamel_parsed_it(path: Path) -> None:
+    """rosbags read these with ruamel (YAML 1.2); bagport's libyaml read (1.1) gives the same values."""
+    text = path.read_text()
+    assert parse_metadata(text) == YAML(typ="safe").load(text)
+
+
+def test_each_caller_gets_its_own_copy() -> None:
+    text = "rosbag2_bagfile_information:\n  version: 9\n  custom_data: {a: b}\n"
+    first = parse_metadata(text)
+    first["rosbag2_bagfile_information"]["custom_data"]["a"] = "changed"
+    assert parse_metadata(text)["rosbag2_bagfile_information"]["custom_data"] == {"a": "b"}
+
+
+def test_a_bag_open_parses_its_metadata_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Detection, layout, custom data and rosbags' reader: four reads of one text, one parse (it was four,
+    rosbags' with ruamel)."""
+    write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=0.2))
+    parses: list[str] = []
+    real_load = metadata_yaml.load_plain
+
+    def counted(text: str) -> object:
+        parses.append(text)
+        return real_load(text)
+
+    monkeypatch.setattr(metadata_yaml, "load_plain", counted)
+    metadata_yaml._parsed.cache_clear()
+    assert rosbags.rosbag2.reader.YAML is RosbagsMetadataYAML
+    with open_bag(str(tmp_path / "ep")) as bag:
+        assert bag.info.message_count > 0
+    assert len(parses) == 1
+
+
+def test_unparsable_metadata_is_still_rosbags_reader_error(tmp_path: Path) -> None:
+    folder = tmp_path / "bag"
+    folder.mkdir()
+    (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
+    with pytest.raises(ReaderError, match="Could not load YAML"), Reader(folder):
+        pass

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import json
-from dataclasses import replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 from hypothesis import given
@@ -88,3 +88,16 @@ def test_a_staged_entry_holds_a_digest_and_reads_its_record_back(tmp_path: Path)
     assert entry.with_checks(extra).qa.score == full.with_checks(extra).qa.score
     assert entry.with_checks(extra).whole() == full.with_checks(extra)
     assert full.whole() is full
+
+
+def test_to_dict_is_asdict_without_copying_the_plots() -> None:
+    checks = [CheckResult("values.jumps", "action", 0.1, "warn", False, "a jump")]
+    plots = {
+        "vectors": {"action": [[0.0, 1.0], [2.0, 3.0]]},
+        "thumbnails": {"front": [{"frame": 0, "jpeg": "A"}]},
+    }
+    record = EpisodeQA.build("/bags/a.mcap", checks, duration_s=1.5, frames=45, plots=plots)
+    as_dict = record.to_dict()
+    assert as_dict == asdict(record)
+    assert json.dumps(as_dict) == json.dumps(asdict(record))  # qa.json byte for byte, keys in order
+    assert EpisodeQA.from_dict(json.loads(json.dumps(as_dict))) == record

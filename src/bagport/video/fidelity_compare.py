@@ -251,10 +251,14 @@ def _presentation_ranks(container: Any, stream: Any, fps: int | None, scores: Fr
     time_base = Fraction(stream.time_base) if stream.time_base else None
     stamps = sorted(p.pts for p in container.demux(stream) if p.pts is not None and p.size)
     scores.frames_decoded = len(stamps)
-    for n, pts in enumerate(stamps):
-        if time_base is None or pts * time_base != n * period_s:
-            scores.first_bad_pts_frame = n
-            break
+    if time_base is None:
+        scores.first_bad_pts_frame = 0 if stamps else None
+    else:  # pts * time_base == n * period_s, in integers (Fractions cost 1 ms a small clip)
+        pts_scale = time_base.numerator * period_s.denominator
+        n_scale = period_s.numerator * time_base.denominator
+        scores.first_bad_pts_frame = next(
+            (n for n, pts in enumerate(stamps) if pts * pts_scale != n * n_scale), None
+        )
     return {pts: n for n, pts in enumerate(stamps)}
 
 

@@ -14,7 +14,7 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from flows.console import outlive_closed_output
+from flows.console import outlive_closed_output, say_when_terminated
 from flows.local_server import launch, take_launched
 
 if TYPE_CHECKING:
@@ -389,6 +389,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     """The ``bagport`` program (``argv`` ``None``: the command line's), or a call of it from Python."""
     if argv is None:  # the program: a closed stdout or stderr must not stop its run (flows/console.py)
         outlive_closed_output()
+        if sys.argv[1:2] == ["convert"]:
+            say_when_terminated()
     _launch_for_convert(sys.argv[1:] if argv is None else list(argv))
     try:
         return _run_command(build_parser().parse_args(argv), as_program=argv is None)

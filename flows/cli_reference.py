@@ -21,7 +21,9 @@ command, every option, its default. Errors print as one paragraph (what, where, 
 **1** some episodes were excluded or failed as the QA policy says, or `--fail-fast` stopped the run;
 **2** usage or input error, nothing written. A run outlives its console: when the reader of its output
 goes away (`bagport convert ... | head`, a `tee` or log shipper that dies), it drops what it would have
-printed and goes on to its dataset and its own exit code (the logs are still on the Prefect server).
+printed and goes on to its dataset and its own exit code (the logs are still on the Prefect server). A run
+ended by SIGTERM (a scheduler's time limit) stops at once, as a kill does, after one line saying that the
+same command resumes it (exit status 143).
 """
 
 

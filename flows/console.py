@@ -1,4 +1,4 @@
-"""A run that outlives its console: output to a closed pipe is dropped, the conversion goes on.
+"""The program's console: output to a closed pipe is dropped and the run goes on; a SIGTERM says what stands.
 
 ``bagport convert ... | head``, a ``tee`` or a log shipper that dies, a pager closed early: the reader
 of the program's stdout or stderr goes away while the run works. Python then raises ``BrokenPipeError``
@@ -8,16 +8,29 @@ the flow waited for it forever. The console is only a view of the run (its logs 
 server, its record in the dataset), so losing it must not lose the run: once a stream's pipe is closed,
 its file descriptor is pointed at ``/dev/null`` and what is written is dropped. Standard library only
 (installed before Prefect is imported, so Prefect's handlers take these streams).
+
+A conversion ended by SIGTERM (a scheduler's time limit, a shutdown) still ends at once, as a kill does
+(its server and workers stop with it, ``flows/lifeline.py``; the next run resumes and brings a write it
+interrupted back, ``docs/fleet.md``), but first says so in one line: before, the only trace was the exit
+status and multiprocessing's warning about leaked semaphores.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
+import signal
 import sys
+from types import FrameType
 from typing import Any, TextIO
 
-__all__ = ["outlive_closed_output"]
+__all__ = ["TERMINATED", "outlive_closed_output", "say_when_terminated"]
+
+TERMINATED = (
+    "bagport convert: terminated (SIGTERM) before the run finished. Its finished episodes stay in the staging "
+    "store, and a dataset write it had begun is completed or rolled back by the next run: run the same "
+    "command again to resume."
+)
 
 
 class _ClosedPipeTolerant:
@@ -65,3 +78,19 @@ def outlive_closed_output() -> None:
         stream = getattr(sys, name)
         if stream is not None and not isinstance(stream, _ClosedPipeTolerant):
             setattr(sys, name, _ClosedPipeTolerant(stream))
+
+
+def say_when_terminated() -> None:
+    """On SIGTERM, :data:`TERMINATED` on stderr, then the default end (exit status 143, at once). Only the
+    process that installed it speaks; a fork of it (the pool's forkserver and workers) just ends."""
+    speaker = os.getpid()
+
+    def on_sigterm(_signum: int, _frame: FrameType | None) -> None:
+        if os.getpid() == speaker:
+            with contextlib.suppress(Exception):
+                sys.stderr.write(TERMINATED + "\n")
+                sys.stderr.flush()
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        os.kill(os.getpid(), signal.SIGTERM)
+
+    signal.signal(signal.SIGTERM, on_sigterm)

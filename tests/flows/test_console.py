@@ -1,9 +1,11 @@
-"""A run whose console goes away (``bagport convert ... | head``) still converts and commits."""
+"""A run whose console goes away (``bagport convert ... | head``) still converts and commits; a run ended by
+SIGTERM says so."""
 
 from __future__ import annotations
 
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -11,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from bagport.synth import EpisodeSpec, write_episode_bag
-from flows.console import _ClosedPipeTolerant
+from flows.console import TERMINATED, _ClosedPipeTolerant
 from tests.helpers import REPO, SAMPLE_CONTRACT
 
 
@@ -55,3 +57,35 @@ def test_a_convert_whose_output_reader_exits_still_writes_its_dataset(tmp_path: 
     assert code == 0
     info = json.loads((out / "meta" / "info.json").read_text())
     assert info["total_episodes"] == 3
+
+
+@pytest.mark.slow
+def test_a_convert_ended_by_sigterm_says_what_stands(tmp_path: Path) -> None:
+    """SIGTERM (a scheduler's time limit) ends the run at once, as before (exit status 143), with one line
+    saying what stands and how to resume; before, only multiprocessing's warning about leaked semaphores."""
+    for name in ("a", "b", "c"):
+        write_episode_bag(tmp_path / "bags" / name, "mcap", EpisodeSpec(duration_s=2.0))
+    command = [
+        sys.executable, "-m", "flows.cli", "convert", "--glob", str(tmp_path / "bags" / "*"),
+        "--contract", str(SAMPLE_CONTRACT), "--output", str(tmp_path / "out"), "--verbose",
+    ]  # fmt: skip
+    env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
+    process = subprocess.Popen(
+        command, cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    assert process.stdout is not None
+    seen = []
+    for line in process.stdout:  # the flow has begun: the run is under way
+        seen.append(line)
+        if "Beginning flow run" in line:
+            process.send_signal(signal.SIGTERM)
+            break
+    try:
+        rest = process.communicate(timeout=120)[0]
+    finally:
+        process.kill()
+    assert process.returncode == -signal.SIGTERM
+    output = "".join(seen) + rest
+    assert TERMINATED in output
+    assert "Traceback" not in output
+    assert not (tmp_path / "out").exists()

@@ -171,7 +171,8 @@ class ValueMonitor:
         if not len(after):
             return
         if block.shape[1]:
-            speeds = np.fmax.reduce(np.abs(after - before), axis=1).astype(np.float64) * self._fps  # nanmax, unwarned
+            # the values of nanmax, without its warning for a frame whose values are all NaN
+            speeds = np.fmax.reduce(np.abs(after - before), axis=1).astype(np.float64) * self._fps
         else:
             speeds = np.zeros(len(after))
         measured = speeds[~np.isnan(speeds)]

@@ -15,6 +15,7 @@ from prefect.context import refresh_global_settings_context
 from prefect.events.worker import EventsWorker
 from prefect.logging.handlers import APILogWorker
 from prefect.settings import (
+    PREFECT_API_SSL_CERT_FILE,
     PREFECT_API_URL,
     PREFECT_CLIENT_CSRF_SUPPORT_ENABLED,
     PREFECT_FLOWS_HEARTBEAT_FREQUENCY,
@@ -28,6 +29,7 @@ from bagport.errors import BagportError
 from flows import forkserver
 from flows.lifeline import when_cut
 from flows.local_server import (
+    LOOPBACK_CA,
     LocalServer,
     ServerStartError,
     ServerUnreachableError,
@@ -118,8 +120,9 @@ def _require_server(api_url: str) -> None:
 
 @contextmanager
 def _on_temporary_server() -> Iterator[None]:
-    """A run on bagport's temporary server: no flow-run heartbeats, no CSRF tokens, and queued logs and
-    events delivered while the server still listens.
+    """A run on bagport's temporary server: no flow-run heartbeats, no CSRF tokens, a one-certificate CA
+    file for its clients' TLS contexts (:data:`flows.local_server.LOOPBACK_CA`: plain HTTP, never used),
+    and queued logs and events delivered while the server still listens.
 
     Heartbeats let a server mark a flow run whose process died as crashed; the temporary server stops
     with the run (it has a lifeline, ``flows/local_server.py``), so nothing could ever watch them. They
@@ -130,7 +133,11 @@ def _on_temporary_server() -> Iterator[None]:
     """
     try:
         with temporary_settings(
-            {PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None, PREFECT_CLIENT_CSRF_SUPPORT_ENABLED: False}
+            {
+                PREFECT_FLOWS_HEARTBEAT_FREQUENCY: None,
+                PREFECT_CLIENT_CSRF_SUPPORT_ENABLED: False,
+                PREFECT_API_SSL_CERT_FILE: str(LOOPBACK_CA),
+            }
         ):
             yield
     finally:

@@ -6,6 +6,7 @@ import contextlib
 import os
 import signal
 import socket
+import ssl
 import time
 import urllib.error
 import urllib.request
@@ -237,3 +238,13 @@ def test_the_servers_connections_send_without_delay() -> None:
             assert _peer_socket_option(server._process.pid, client.getsockname()) != 0
     finally:
         server.stop()
+
+
+def test_the_loopback_ca_file_is_one_certificate_a_tls_context_loads() -> None:
+    """What Prefect's clients load for the temporary server (plain HTTP) instead of a 140-certificate
+    bundle: a valid CA file (an empty one is an error to ``ssl``), holding one certificate and no key."""
+    text = local_server.LOOPBACK_CA.read_text()
+    assert text.count("BEGIN CERTIFICATE") == 1
+    assert "PRIVATE KEY" not in text
+    context = ssl.create_default_context(cafile=str(local_server.LOOPBACK_CA))
+    assert context.cert_store_stats()["x509_ca"] == 1

@@ -26,7 +26,7 @@ from bagport.config import ConvertConfig
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows import forkserver
 from flows.convert import run_config, run_convert
-from flows.local_server import LocalServer, loopback_listener
+from flows.local_server import LOOPBACK_CA, LocalServer, loopback_listener
 from flows.runners import ServerDownError, WarmProcessPoolTaskRunner, prefect_api
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 
@@ -145,15 +145,19 @@ def _heartbeat_seconds() -> int | None:
 def test_heartbeats_and_csrf_tokens_go_to_a_configured_server_only(monkeypatch: pytest.MonkeyPatch) -> None:
     """Nothing watches heartbeats on the temporary server, which stops with the run (and joining their
     thread cost up to 1 s per run), and it checks no CSRF token (loopback, no UI: fetching one was a
-    request per client for nothing), even where the environment turns servers' CSRF protection on; a
-    server the user configured keeps both (heartbeats mark dead runs crashed)."""
+    request per client for nothing), even where the environment turns servers' CSRF protection on; its
+    clients load a one-certificate CA file (plain HTTP: never used; a bundle cost 30-60 ms per client). A
+    server the user configured keeps all three (heartbeats mark dead runs crashed; its TLS settings)."""
     monkeypatch.delenv("PREFECT_API_URL", raising=False)
     monkeypatch.setenv("PREFECT_SERVER_API_CSRF_PROTECTION_ENABLED", "true")
     default = get_current_settings().flows.heartbeat_frequency
+    users_cert_file = get_current_settings().api.ssl_cert_file
     assert default is not None
+    assert users_cert_file != str(LOOPBACK_CA)
     with prefect_api():
         assert _heartbeat_seconds() is None
         assert not get_current_settings().client.csrf_support_enabled
+        assert get_current_settings().api.ssl_cert_file == str(LOOPBACK_CA)
         with get_client(sync_client=True) as client:  # a state-changing request, without a token
             assert client.create_flow_run(_noop_flow).id is not None
     users = LocalServer()  # stands for the user's own server
@@ -163,6 +167,7 @@ def test_heartbeats_and_csrf_tokens_go_to_a_configured_server_only(monkeypatch: 
         with temporary_settings({PREFECT_API_URL: users.api_url}), prefect_api():
             assert _heartbeat_seconds() == default
             assert get_current_settings().client.csrf_support_enabled
+            assert get_current_settings().api.ssl_cert_file == users_cert_file
             EventsWorker.drain_all(timeout=30)  # its heartbeat event, sent before that server stops
     finally:
         users.stop()

@@ -1,7 +1,7 @@
 """What a process-pool worker needs before its first task, done once in the forkserver
 (:mod:`flows.forkserver`) so that every worker forked from it starts with it done: Prefect's task
-engine and runners, bagport's tasks (and through them the library), the flow's own module, and
-Prefect's collections.
+engine and runners, bagport's tasks (and through them the library), the flow's own module, the modules
+libraries import lazily at a worker's first task run and episode, and Prefect's collections.
 
 A worker unpickles the flow with the flow run's context, which imports :mod:`flows.convert` (and with
 it the reduce's flow modules): 0.2 s in each worker before its first episode, when it was not here.
@@ -16,8 +16,15 @@ from __future__ import annotations
 from flows.import_gc import paused
 
 with paused():  # frozen after: the forked workers' collections skip them (flows/import_gc.py)
+    # Prefect's task engine and runners, bagport's tasks, the flow's module, and what a worker imported
+    # late, in its first task run or episode (anyio's asyncio backend for Prefect's async clients,
+    # pyarrow's pandas glue, PyAV's subtitles, rosbags' primitives: 15 modules, 40-60 ms of its start)
+    import anyio._backends._asyncio
+    import av.subtitles.stream
     import prefect.task_engine
     import prefect.task_runners
+    import pyarrow.pandas_compat
+    import rosbags.serde.primitives
     from prefect.plugins import load_prefect_collections
 
     import flows.convert
@@ -31,6 +38,10 @@ with paused():  # frozen after: the forked workers' collections skip them (flows
 __all__ = ["PRELOADED"]
 
 PRELOADED = (
+    anyio._backends._asyncio,
+    av.subtitles.stream,
+    pyarrow.pandas_compat,
+    rosbags.serde.primitives,
     flows.convert,
     prefect.task_engine,
     prefect.task_runners,

@@ -62,7 +62,7 @@ PHASES = {
     "qa.json (to_dict + dumps)": ("qa/result.py", "to_dict"),
     "provenance table": ("episode/sinks.py", "write_provenance"),
     "stats partials": ("episode/sinks.py", "stats"),
-    "publish to staging (copies, episode.json)": ("episode/convert.py", "_publish"),
+    "publish to staging (a rename, episode.json)": ("episode/publish.py", "publish_episode"),
     "folders removed (work folder, scratch)": ("shutil.py", "rmtree"),
 }
 """Where an episode's time goes: the cumulative time of each step's function (the outermost of that name)."""

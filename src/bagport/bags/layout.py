@@ -11,6 +11,7 @@ as the data files present, merged in log-time order, with a warning saying why.
 from __future__ import annotations
 
 import re
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
@@ -48,11 +49,12 @@ def _natural_key(path: BagPath) -> list[Any]:
     return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", path.name)]
 
 
-def _alias(path: BagPath, name: str, scratch: Path) -> Any:
-    """``path`` presented as ``name`` (rosbags picks its reader by suffix)."""
+def _alias(path: BagPath, name: str, scratch: Callable[[], Path]) -> Any:
+    """``path`` presented as ``name`` (rosbags picks its reader by suffix); ``scratch`` gives the folder
+    for the link (made when first asked)."""
     if isinstance(path, RemotePath):
         return path.renamed(name)
-    link = scratch / name
+    link = scratch() / name
     link.symlink_to(path.resolve(), target_is_directory=path.is_dir())
     return link
 
@@ -94,8 +96,9 @@ def _metadata_problem(metadata: dict[str, Any], present: list[BagPath], storage:
     return None
 
 
-def plan_reads(path: BagPath, storage: Storage, scratch: Path, uri: str) -> ReadPlan:
-    """The paths to open for a bag at ``path`` whose content is ``storage``."""
+def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri: str) -> ReadPlan:
+    """The paths to open for a bag at ``path`` whose content is ``storage``; ``scratch`` gives a folder for
+    the links that rename a file (only asked for when one is needed)."""
     suffix = SUFFIX[storage]
     if path.is_file():
         opened = path if path.suffix == suffix else _alias(path, f"bag{suffix}", scratch)

@@ -106,9 +106,9 @@ class RosbagsReader:
         self._uri = uri
         self._cleanup = cleanup
         self._remote = remote
-        self._scratch = scratch_dir("link")
+        self._scratch: Path | None = None  # made only when a file needs another name (_link_folder)
         try:
-            plan = plan_reads(path, storage, self._scratch, uri)
+            plan = plan_reads(path, storage, self._link_folder, uri)
         except BaseException:
             self.close()
             raise
@@ -297,12 +297,20 @@ class RosbagsReader:
             return {}
         return mcap_publish_times_ns(self._mcap_files, topics, self._uri)
 
+    def _link_folder(self) -> Path:
+        """This reader's scratch folder for the links that rename a bag's files, made at its first use (a
+        rosbag2 folder read as it is needs none: a folder made and removed per bag cost 1-6 ms)."""
+        if self._scratch is None:
+            self._scratch = scratch_dir("link")
+        return self._scratch
+
     def close(self) -> None:
         reader = getattr(self, "_reader", None)
         if reader is not None and getattr(reader, "isopen", True):
             with contextlib.suppress(Exception):
                 reader.close()
-        shutil.rmtree(self._scratch, ignore_errors=True)
+        if self._scratch is not None:
+            shutil.rmtree(self._scratch, ignore_errors=True)
         remote = getattr(self, "_remote", None)
         if remote is not None:
             remote.close()

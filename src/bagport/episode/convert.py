@@ -29,6 +29,7 @@ from bagport.episode.assemble import iter_frames
 from bagport.episode.checks import bag_fingerprint
 from bagport.episode.fidelity import EpisodeFidelity
 from bagport.episode.prepare import PreparedEpisode, prepare_episode
+from bagport.episode.publish import publish_episode
 from bagport.episode.quality import assess_episode, bag_checks
 from bagport.episode.reuse import ReusedClip, clip_keys, find_reusable_clips
 from bagport.episode.sinks import EpisodeSinks, write_provenance
@@ -39,7 +40,6 @@ from bagport.qa import CheckResult, EpisodeQA, QAConfig, ValueMonitor
 from bagport.request import EpisodeRequest
 from bagport.scratch import clean_dead_scratch, scratch_dir
 from bagport.staging import (
-    EPISODE_SUMMARY,
     FRAMES_FILE,
     PROVENANCE_FILE,
     QA_FILE,
@@ -48,10 +48,7 @@ from bagport.staging import (
     StagedFeature,
     episode_dir,
     read_summary,
-    staged_path,
-    write_json,
 )
-from bagport.uris import is_local
 from bagport.video import ClipInfo, EncoderSettings
 
 __all__ = ["convert_episode"]
@@ -160,7 +157,7 @@ def _stage(episode: _Episode) -> EpisodeSummary:
     in_hand = sinks.frames.written_table()
     frames = in_hand if in_hand is not None else str(workdir / FRAMES_FILE)
     summary = _summary(episode, staged, qa, frames)
-    _publish(workdir, summary.dir_uri, summary)
+    publish_episode(workdir, summary.dir_uri, summary)
     return summary
 
 
@@ -310,33 +307,3 @@ def _take_reused(
     if means:
         plots["image_means"] = {**monitor.plots()["image_means"], **means}
     return plots
-
-
-def _publish(workdir: Path, target: str, summary: EpisodeSummary) -> None:
-    """Move the finished artifact to the staging store; the summary goes last (completion marker)."""
-    fs, path = url_to_fs(target)
-    if fs.exists(path):
-        fs.rm(path, recursive=True)
-    fs.makedirs(path, exist_ok=True)
-    made = {path.rstrip("/")}
-    local = is_local(fs)
-    for item in sorted(workdir.rglob("*")):
-        if item.is_file():
-            remote = staged_path(path, item.relative_to(workdir).as_posix())
-            parent = remote.rsplit("/", 1)[0]
-            if parent not in made:
-                fs.makedirs(parent, exist_ok=True)
-                made.add(parent)
-            if not (local and _renamed(item, remote)):
-                fs.put_file(str(item), remote)
-    write_json(staged_path(target, EPISODE_SUMMARY), summary.to_dict())
-
-
-def _renamed(source: Path, target: str) -> bool:
-    """``source`` renamed to ``target`` when both are on one local file system (the scratch folder and
-    the staging store on one disk: no copy); ``False`` when they are not, and it is copied instead."""
-    try:
-        source.replace(target)
-    except OSError:  # EXDEV: another file system
-        return False
-    return True

@@ -174,6 +174,9 @@ class LocalServer:
             return
         if os.environ.get("PREFECT_API_URL") == self.api_url:
             del os.environ["PREFECT_API_URL"]
+            # launch() set the CA file with the URL: a later run in this process may go to a TLS server
+            if os.environ.get("PREFECT_API_SSL_CERT_FILE") == str(LOOPBACK_CA):
+                del os.environ["PREFECT_API_SSL_CERT_FILE"]
         if graceful:
             self._process.terminate()
         else:

@@ -248,3 +248,30 @@ def test_the_loopback_ca_file_is_one_certificate_a_tls_context_loads() -> None:
     assert "PRIVATE KEY" not in text
     context = ssl.create_default_context(cafile=str(local_server.LOOPBACK_CA))
     assert context.cert_store_stats()["x509_ca"] == 1
+
+
+@pytest.mark.slow
+def test_the_loopback_ca_file_is_set_for_the_temporary_server_only(
+    no_prefect_config: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``launch()`` points Prefect's CA file at the loopback one with the URL, and the server's stop takes
+    both away: a caller of ``main()`` whose next run goes to a configured (TLS) server keeps its own
+    settings (the variable stayed after the run, seen as a test's leak). A user's own value is kept."""
+    for users, expected in (
+        (None, str(local_server.LOOPBACK_CA)),
+        ("/etc/users-ca.pem", "/etc/users-ca.pem"),
+    ):
+        if users is None:
+            monkeypatch.delenv("PREFECT_API_SSL_CERT_FILE", raising=False)
+        else:
+            monkeypatch.setenv("PREFECT_API_SSL_CERT_FILE", users)
+        monkeypatch.setattr(local_server, "_launched", None)
+        server = local_server.launch()
+        assert server is not None
+        try:
+            assert os.environ["PREFECT_API_SSL_CERT_FILE"] == expected
+        finally:
+            local_server.take_launched()
+            server.stop(graceful=False)
+        assert os.environ.get("PREFECT_API_SSL_CERT_FILE") == users
+        assert "PREFECT_API_URL" not in os.environ

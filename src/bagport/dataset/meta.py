@@ -36,11 +36,11 @@ from bagport.staging import FRAMES_FILE, STATS_FILE, EpisodeSummary, StagedFeatu
 from bagport.stats import (
     FeatureStats,
     VectorSketch,
+    column_stats,
     episode_sketch_fields,
     histogram_stats,
     merge_stacked_stats,
     stats_from_json,
-    vector_stats,
 )
 from bagport.video.depth import histogram_levels
 
@@ -126,8 +126,10 @@ def load_episode_stats(
         "index": np.arange(placement.from_index, placement.to_index),
         "task_index": task_indices,
     }
-    for key, column in defaults.items():
-        stats[key] = vector_stats(column)
+    for (key, column), column_stat in zip(
+        defaults.items(), column_stats(list(defaults.values())), strict=True
+    ):
+        stats[key] = column_stat
         mine.values[key] = VectorSketch.of(column)
     sketches.merge(mine)
     return EpisodeStats(stats, histograms, largest)

@@ -14,6 +14,7 @@ from bagport.stats.numeric import (
     STAT_KEYS,
     FeatureStats,
     ImageStatsAccumulator,
+    column_stats,
     histogram_stats,
     vector_stats,
 )
@@ -26,6 +27,7 @@ __all__ = [
     "FeatureStats",
     "VectorSketch",
     "ImageStatsAccumulator",
+    "column_stats",
     "episode_sketch_fields",
     "histogram_stats",
     "merge_feature_stats",

@@ -9,13 +9,14 @@ shape (1, 1, 1) in metres (LeRobot does not divide depth by 255), from a histogr
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any, cast
 
 import numpy as np
 import numpy.typing as npt
 from PIL import Image as PILImage
 
-__all__ = ["QUANTILES", "STAT_KEYS", "FeatureStats", "ImageStatsAccumulator", "vector_stats"]
+__all__ = ["QUANTILES", "STAT_KEYS", "FeatureStats", "ImageStatsAccumulator", "column_stats", "vector_stats"]
 
 QUANTILES: dict[str, float] = {"q01": 0.01, "q10": 0.10, "q50": 0.50, "q90": 0.90, "q99": 0.99}
 STAT_KEYS = ("min", "max", "mean", "std", "count", *QUANTILES)
@@ -42,6 +43,20 @@ def vector_stats(values: npt.NDArray[Any]) -> FeatureStats:
     for key, row in zip(QUANTILES, np.quantile(data, list(QUANTILES.values()), axis=0), strict=True):
         stats[key] = row
     return stats
+
+
+def column_stats(columns: Sequence[npt.NDArray[Any]]) -> list[FeatureStats]:
+    """:func:`vector_stats` of each of several columns of one length, in one call: the same values, bit for
+    bit (each column is contiguous, so numpy sums it pairwise as it does a column alone), at a fifth of
+    the cost for an episode's five index columns (numpy's cost per call is most of it)."""
+    data = np.empty((len(columns[0]), len(columns)), dtype=np.float64, order="F")
+    for i, column in enumerate(columns):
+        data[:, i] = column
+    stats = vector_stats(data)
+    return [
+        {key: row if key == "count" else row[i : i + 1] for key, row in stats.items()}
+        for i in range(len(columns))
+    ]
 
 
 class ImageStatsAccumulator:

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import numpy.typing as npt
 from hypothesis import given, settings
@@ -10,6 +12,7 @@ from hypothesis import strategies as st
 from bagport.stats import (
     QUANTILES,
     ImageStatsAccumulator,
+    column_stats,
     merge_feature_stats,
     merge_histograms,
     vector_stats,
@@ -38,6 +41,30 @@ def test_vector_quantiles_are_numpys_per_dimension(frames: int, dims: int, seed:
     for key, q in QUANTILES.items():
         np.testing.assert_array_equal(stats[key], np.quantile(values, q, axis=0))
     assert stats["q50"].shape == (dims,)
+
+
+@settings(max_examples=30, deadline=None)
+@given(frames=st.sampled_from([1, 2, 3, 7, 60, 997, 30_001, 250_000]), fps=st.sampled_from([10, 15, 30, 50]))
+def test_column_stats_equal_each_columns_vector_stats_bit_for_bit(frames: int, fps: int) -> None:
+    """An episode's index columns (as the reduce builds them) in one call: the values of one call each,
+    exactly, also where float sums depend on their order (long float32 timestamps)."""
+    rng = np.random.default_rng(frames + fps)
+    frame_index = np.arange(frames, dtype=np.int64)
+    columns: list[npt.NDArray[Any]] = [
+        (frame_index / fps).astype(np.float32),
+        frame_index,
+        np.full(frames, 41),
+        np.arange(123_456, 123_456 + frames),
+        np.sort(rng.integers(0, 4, size=frames)),
+        rng.normal(size=frames) * 1e6,
+    ]
+    together = column_stats(columns)
+    for column, stats in zip(columns, together, strict=True):
+        alone = vector_stats(column)
+        assert stats.keys() == alone.keys()
+        for key, value in alone.items():
+            assert stats[key].dtype == value.dtype and stats[key].shape == value.shape, key
+            assert stats[key].tobytes() == value.tobytes(), key
 
 
 def test_image_stats_are_per_channel_in_unit_range_and_exact() -> None:

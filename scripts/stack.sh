@@ -107,7 +107,10 @@ EOF
   log "postgres on 127.0.0.1:$pg_port"
   start_postgres "$pg_port"
   log "prefect server on $PREFECT_UI_URL"
+  # months of hourly runs: Prefect's vacuum deletes flow runs (with their task runs, logs and artifacts)
+  # that ended more than 90 days ago, and old events; bagport reads none of them back
   PREFECT_SERVER_DATABASE_CONNECTION_URL="$BAGPORT_DATABASE_URL" PREFECT_UI_API_URL="$PREFECT_API_URL" \
+    PREFECT_SERVER_SERVICES_DB_VACUUM_ENABLED="${PREFECT_SERVER_SERVICES_DB_VACUUM_ENABLED:-events,flow_runs}" \
     start prefect-server "$BIN/prefect" server start --host 127.0.0.1 --port "$api_port"
   log "S3 (moto) on $AWS_ENDPOINT_URL"
   start s3 "$BIN/moto_server" -H 127.0.0.1 -p "$s3_port"

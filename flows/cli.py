@@ -11,9 +11,9 @@ import os
 import sys
 import time
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING
 
+from flows import cli_commands
 from flows.console import outlive_closed_output, say_when_terminated
 from flows.local_server import launch, take_launched
 
@@ -26,29 +26,6 @@ if TYPE_CHECKING:
     from bagport.run import RunPlan
 
 __all__ = ["build_parser", "main"]
-
-
-def _msg_definitions(args: argparse.Namespace) -> dict[str, str]:
-    from bagport.bags import read_msg_path  # noqa: PLC0415 - keep `--help` fast
-
-    return read_msg_path(args.msg_path) if args.msg_path else {}
-
-
-def _cmd_inspect(args: argparse.Namespace) -> int:
-    from bagport.bags import format_bag_info, open_bag  # noqa: PLC0415 - keep `--help` fast
-
-    definitions = _msg_definitions(args)
-    for uri in args.uri:
-        with open_bag(uri, msg_definitions=definitions) as reader:
-            print(format_bag_info(reader.info))
-            read = reader.transfer
-            if read.access != "local":
-                print(
-                    f"Read:              {read.access}, {read.bytes_read} bytes in {read.requests} requests"
-                )
-            for topic, msgtype in sorted(reader.undefined_types.items()):
-                print(f"  type defined nowhere: {topic} ({msgtype}); give its .msg with --msg-path DIR")
-    return 0
 
 
 def _progress_bar(done: int, total: int) -> None:
@@ -196,79 +173,6 @@ def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
     )
 
 
-def _cmd_qa(args: argparse.Namespace) -> int:
-    from bagport.episode.score import score_manifest  # noqa: PLC0415
-    from bagport.qa import episode_ref  # noqa: PLC0415
-
-    entries = score_manifest(
-        args.manifest,
-        args.contract,
-        args.qa,
-        workers=args.workers,
-        msg_definitions=_msg_definitions(args),
-        keep_failed=args.keep_failed,
-    )
-    for entry in entries:
-        qa = entry.qa
-        where = episode_ref(qa.bag_uri, entry.segment)
-        label = f" ({entry.label})" if entry.label else ""
-        reason = f"excluded: {entry.excluded_reason}" if entry.by_label else qa.headline()
-        print(f"{qa.verdict:4s} {qa.score:.2f}  bags[{entry.manifest_entry}] {where}{label}: {reason}")
-    if args.report:
-        from bagport.qa.report import render_report  # noqa: PLC0415
-
-        Path(args.report).write_text(
-            render_report(
-                entries,
-                {
-                    "manifest": args.manifest,
-                    "contract": args.contract,
-                    "bags": len({e.manifest_entry for e in entries}),
-                    "episodes": len(entries),
-                },
-            ),
-            encoding="utf-8",
-        )
-        print(f"report: {args.report}", file=sys.stderr)
-    # episodes left out for their label (failed / discarded demonstrations) do not fail the command
-    scored = [e for e in entries if not e.by_label]
-    failing = sum(e.qa.verdict == "fail" for e in scored)
-    unit = "bag(s)" if all(e.segment is None for e in entries) else "episode(s)"
-    labelled = (
-        f" ({len(entries) - len(scored)} more excluded for their label)" if len(scored) < len(entries) else ""
-    )
-    print(f"{len(scored) - failing} of {len(scored)} {unit} pass QA{labelled}", file=sys.stderr)
-    return 1 if failing else 0
-
-
-def _cmd_validate(args: argparse.Namespace) -> int:
-    from bagport.dataset.validate import validate_dataset  # noqa: PLC0415
-
-    def progress(done: int, total: int) -> None:
-        if done == total or done % 200 == 0:
-            print(f"\rdecoded {done}/{total} frames", end="", file=sys.stderr, flush=True)
-
-    report = validate_dataset(args.root, repo_id=args.repo_id, decode_every=args.every, progress=progress)
-    print(file=sys.stderr)
-    print(
-        f"OK {report.root}: {report.episodes} episode(s), {report.frames} frames, "
-        f"{report.frames_decoded} decoded through LeRobot ({report.video_backend}); videos: "
-        f"{', '.join(report.video_keys) or 'none'}; {report.files_checked} file(s) match their SHA-256"
-    )
-    return 0
-
-
-def _cmd_repair(args: argparse.Namespace) -> int:
-    from bagport.dataset.repair import repair_dataset  # noqa: PLC0415
-
-    report = repair_dataset(args.output, clean_scratch=True)
-    for action in report.actions:
-        print(action)
-    if not report.actions:
-        print(f"{args.output}: nothing to repair")
-    return 0
-
-
 def _install_crash_hook() -> None:
     """Test-only: ``BAGPORT_CRASH_AT=<step>`` SIGKILLs the process right after that commit step
     (see :mod:`bagport.dataset.crashpoints`); the library itself reads no environment."""
@@ -279,61 +183,17 @@ def _install_crash_hook() -> None:
         set_hook(kill_after(step))
 
 
-def _cmd_contract_check(args: argparse.Namespace) -> int:
-    from bagport.contract import load_contract  # noqa: PLC0415
-    from bagport.feature_table import describe_features, format_feature_table  # noqa: PLC0415
-
-    plan = load_contract(args.contract)
-    bags = args.bag or [None]
-    definitions = _msg_definitions(args)
-    for bag in bags:
-        rows = describe_features(plan, bag, definitions)
-        print(f"{args.contract}" + (f" against {bag}" if bag else "") + ": OK")
-        print(format_feature_table(plan, rows))
-    return 0
-
-
-def _cmd_contract_init(args: argparse.Namespace) -> int:
-    from bagport.bags import open_bag  # noqa: PLC0415
-    from bagport.contract.draft import draft_contract  # noqa: PLC0415
-    from bagport.errors import BagportError  # noqa: PLC0415
-
-    with open_bag(args.bag, msg_definitions=_msg_definitions(args)) as reader:
-        text = draft_contract(reader.info, robot_type=args.robot_type, fps=args.fps)
-    if args.out:
-        out = Path(args.out)
-        if out.exists():
-            raise BagportError(f"{out} already exists; nothing was written. Fix: choose another --out.")
-        out.write_text(text)
-        print(f"wrote {out}", file=sys.stderr)
-    else:
-        print(text, end="")
-    return 0
-
-
-def _cmd_synth(args: argparse.Namespace) -> int:
-    from bagport.synth import write_sample_fleet  # noqa: PLC0415
-
-    paths = write_sample_fleet(
-        Path(args.out), episodes=args.episodes, duration_s=args.duration, seed=args.seed
-    )
-    for path in paths:
-        print(path)
-    print(f"wrote {len(paths)} bag(s) and {Path(args.out) / 'manifest.yaml'}", file=sys.stderr)
-    return 0
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The `bagport` argument parser (:mod:`flows.cli_parser`) with this module's command handlers."""
     handlers = {
         "convert": _cmd_convert,
-        "qa": _cmd_qa,
-        "inspect": _cmd_inspect,
-        "validate": _cmd_validate,
-        "repair": _cmd_repair,
-        "contract check": _cmd_contract_check,
-        "contract init": _cmd_contract_init,
-        "synth": _cmd_synth,
+        "qa": cli_commands.cmd_qa,
+        "inspect": cli_commands.cmd_inspect,
+        "validate": cli_commands.cmd_validate,
+        "repair": cli_commands.cmd_repair,
+        "contract check": cli_commands.cmd_contract_check,
+        "contract init": cli_commands.cmd_contract_init,
+        "synth": cli_commands.cmd_synth,
     }
     from flows import cli_parser  # noqa: PLC0415 - after a convert's temporary server is launched (main)
 

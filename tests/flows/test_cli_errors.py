@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-import flows.cli
+import flows.cli_commands
 from bagport.errors import BagportError, QualityError
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import main
@@ -171,5 +171,5 @@ def test_the_exit_code_comes_from_the_error_type_not_its_text(
     def fail(_args: object) -> int:
         raise error
 
-    monkeypatch.setattr(flows.cli, "_cmd_synth", fail)
+    monkeypatch.setattr(flows.cli_commands, "cmd_synth", fail)
     assert main(["synth", "--out", str(tmp_path / "x")]) == code

@@ -30,8 +30,9 @@ def publish_episode(workdir: Path, target: str, summary: EpisodeSummary) -> None
     fs, path = url_to_fs(target)
     if fs.exists(path):
         fs.rm(path, recursive=True)
-    if not (is_local(fs) and _renamed_whole(workdir, Path(path))):
-        _move_files(fs, workdir, path, local=is_local(fs))
+    local = is_local(fs)
+    if not (local and _renamed_whole(workdir, Path(path))):
+        _move_files(fs, workdir, path, local=local)
     write_json(staged_path(target, EPISODE_SUMMARY), summary.to_dict())
 
 

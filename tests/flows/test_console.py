@@ -31,16 +31,18 @@ def test_writing_to_a_closed_pipe_drops_the_text_and_keeps_dropping() -> None:
 
 
 @pytest.mark.slow
-def test_a_convert_whose_output_reader_exits_still_writes_its_dataset(tmp_path: Path) -> None:
+@pytest.mark.parametrize("runner", ["process", "dask", "ray"])
+def test_a_convert_whose_output_reader_exits_still_writes_its_dataset(tmp_path: Path, runner: str) -> None:
     """The reader of stdout and stderr exits after the first log line, as ``| head -1`` does: the run goes
     on to its dataset and exits 0 (it exited 1 with no dataset: rich's console raised SystemExit in the
-    flow, or crashed a pool worker's task run and the flow waited for it forever)."""
+    flow, or crashed a pool worker's task run and the flow waited for it forever). The same on a local
+    Dask cluster and a local Ray instance, whose worker processes the CLI starts after its output left."""
     for name in ("a", "b", "c"):
         write_episode_bag(tmp_path / "bags" / name, "mcap", EpisodeSpec(duration_s=0.5))
     out = tmp_path / "out"
     command = [
         sys.executable, "-m", "flows.cli", "convert", "--glob", str(tmp_path / "bags" / "*"),
-        "--contract", str(SAMPLE_CONTRACT), "--output", str(out), "--verbose",
+        "--contract", str(SAMPLE_CONTRACT), "--output", str(out), "--verbose", "--runner", runner,
     ]  # fmt: skip
     env = {k: v for k, v in os.environ.items() if k != "PREFECT_API_URL"}
     process = subprocess.Popen(

@@ -54,7 +54,7 @@ def column_stats(columns: Sequence[npt.NDArray[Any]]) -> list[FeatureStats]:
         data[:, i] = column
     stats = vector_stats(data)
     return [
-        {key: row if key == "count" else row[i : i + 1] for key, row in stats.items()}
+        {key: row.copy() if key == "count" else row[i : i + 1] for key, row in stats.items()}
         for i in range(len(columns))
     ]
 

@@ -30,6 +30,7 @@ from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
 from flows import forkserver
 from flows.artifacts import Progress, publish_run_artifacts
+from flows.cancel import cancel_unfinished
 from flows.reduce import reduce_dataset
 from flows.run_story import completed_state
 from flows.runners import (
@@ -104,7 +105,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
                 continue
             failures.append(failure)
             if config.fail_fast:
-                unfinished = _cancel_unfinished(segmenting) + _cancel_unfinished(episodes.futures)
+                unfinished = cancel_unfinished(segmenting) + cancel_unfinished(episodes.futures)
                 message = (
                     f"bags[{failure.manifest_entry}] {failure.bag_uri} could not be split into episodes "
                     f"({failure.error}) and --fail-fast is set: the run stopped ({unfinished} task(s) were not "
@@ -239,7 +240,7 @@ class _Episodes:
     def cancel_unfinished(self) -> int:
         """Cancel the task runs not finished yet; how many episodes they held."""
         return sum(
-            len(batch) * _cancel_unfinished([future])
+            len(batch) * cancel_unfinished([future])
             for future, batch in zip(self.futures, self._batches, strict=True)
         )
 
@@ -300,40 +301,6 @@ def _fail_fast_reason(
         if plan.qa.on_fail == "fail_run" and verdict == "fail":
             return f"{where} (QA verdict fail, on_fail is 'fail_run')"
     return None
-
-
-def _cancel_unfinished(futures: list[PrefectFuture[Any]]) -> int:
-    """Cancel the episodes not finished yet; how many there were.
-
-    Pending ones never start; one already running on a process or thread finishes and stages (a
-    staged episode is complete or absent: ``episode.json`` is written last).
-    """
-    unfinished = 0
-    for future in futures:
-        wrapped = getattr(future, "wrapped_future", None)  # a concurrent.futures, distributed or Ray future
-        if wrapped is None:
-            continue
-        if not hasattr(wrapped, "done"):
-            unfinished += _cancel_ray(wrapped)
-        elif not wrapped.done():
-            wrapped.cancel()
-            unfinished += 1
-    return unfinished
-
-
-def _cancel_ray(ref: Any) -> bool:
-    """Cancel a Ray task unless it finished; whether it had not.
-
-    Unlike a process or thread, Ray interrupts a running task too; it stages nothing then, as
-    ``episode.json`` is written last, and a re-run converts that episode again.
-    """
-    import ray  # noqa: PLC0415 - only a Ray future gets here
-
-    ready, _ = ray.wait([ref], timeout=0)
-    if ready:
-        return False
-    ray.cancel(ref)
-    return True
 
 
 def run_config(config: ConvertConfig) -> DatasetReport:

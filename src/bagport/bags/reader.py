@@ -21,6 +21,7 @@ from bagport.bags.bundled import BUNDLED_DEFINITIONS
 from bagport.bags.checksums import bag_checksums
 from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag, short_read
 from bagport.bags.detect import detect_storage
+from bagport.bags.download import download_bag
 from bagport.bags.indexcount import window_counts
 from bagport.bags.layout import BagPath, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
@@ -35,7 +36,7 @@ from bagport.bags.typesources import (
     parse_msg_definitions,
     undefined_type_error,
 )
-from bagport.errors import BagportError, BagReadError, TransientError
+from bagport.errors import BagportError, BagReadError
 from bagport.msgtypes import RosType, global_topic, normalize_msgtype
 from bagport.scratch import scratch_dir
 from bagport.uris import is_local
@@ -326,39 +327,6 @@ class RosbagsReader:
         self.close()
 
 
-def _fetch(uri: str, storage_options: Mapping[str, Any]) -> tuple[Path, Path | None]:
-    """Local path of the bag; a remote bag is copied to a private temp folder first."""
-    try:
-        fs, path = url_to_fs(uri, **storage_options)
-    except (ValueError, ImportError) as err:
-        raise BagReadError(f"cannot be opened ({err})", uri=uri, fix="check the URI scheme.") from err
-    if is_local(fs):
-        return Path(path), None
-    scratch = scratch_dir("bag")
-    local = scratch / path.rstrip("/").rsplit("/", 1)[-1]
-    try:
-        if fs.isdir(path):
-            local.mkdir()
-            for remote in fs.find(path):
-                target = local / remote[len(path.rstrip("/")) + 1 :]
-                target.parent.mkdir(parents=True, exist_ok=True)
-                fs.get_file(remote, str(target))
-        else:
-            fs.get_file(path, str(local))
-    except FileNotFoundError as err:
-        shutil.rmtree(scratch, ignore_errors=True)
-        raise BagReadError("does not exist", uri=uri, fix="check the manifest uri.") from err
-    except PermissionError as err:
-        shutil.rmtree(scratch, ignore_errors=True)
-        raise BagReadError(
-            f"access denied ({err})", uri=uri, fix="check the credentials for this store."
-        ) from err
-    except (ConnectionError, TimeoutError, OSError) as err:
-        shutil.rmtree(scratch, ignore_errors=True)
-        raise TransientError(f"{uri}: download failed ({type(err).__name__}: {err}); try again") from err
-    return local, scratch
-
-
 def _open_ranged(
     uri: str, storage_options: Mapping[str, Any], msg_definitions: Mapping[str, str] | None
 ) -> RosbagsReader | None:
@@ -398,7 +366,7 @@ def open_bag(
     ranged = _open_ranged(uri, storage_options or {}, msg_definitions)
     if ranged is not None:
         return ranged
-    local, cleanup = _fetch(uri, storage_options or {})
+    local, cleanup = download_bag(uri, storage_options or {})
     try:
         storage = detect_storage(local, uri)
         return RosbagsReader(uri, local, storage, cleanup, None, msg_definitions)

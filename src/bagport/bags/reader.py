@@ -23,7 +23,7 @@ from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag, sh
 from bagport.bags.detect import detect_storage
 from bagport.bags.download import download_bag
 from bagport.bags.indexcount import window_counts
-from bagport.bags.layout import BagPath, plan_reads
+from bagport.bags.layout import BagPath, ReadPlan, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.metadata_yaml import parse_metadata
 from bagport.bags.publish import Int64Array, mcap_publish_times_ns
@@ -116,6 +116,24 @@ class RosbagsReader:
         self._decompress = plan.message_compression
         self._mcap_files = plan.data_files if storage is Storage.MCAP else []
         self._data_files = plan.data_files
+        self._lacking = self._open(plan, storage, msg_definitions)
+        self._info = self._bag_info(path, storage, plan)
+        self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
+        if remote is not None:
+            self._transfer = remote.stats
+        elif cleanup is not None:
+            size = self._info.size_bytes
+            self._transfer = TransferStats("download", bytes_read=size, requests=len(plan.files))
+        else:
+            self._transfer = TransferStats("local")
+
+    def _open(
+        self, plan: ReadPlan, storage: Storage, msg_definitions: Mapping[str, str] | None
+    ) -> dict[str, str]:
+        """Open rosbags' reader on the planned files with every type it can load (the bag's own, bagport's
+        bundled ones, ``msg_definitions``); returns the types still lacking a definition. A bag that cannot
+        be opened closes this reader and raises :class:`BagReadError` (its damage located)."""
+        uri = self._uri
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
         try:
             ours = parse_msg_definitions(BUNDLED_DEFINITIONS, "bagport's bundled types")
@@ -146,6 +164,10 @@ class RosbagsReader:
         except BaseException:  # TransientError from a ranged read, KeyboardInterrupt
             self.close()
             raise
+        return lacking
+
+    def _bag_info(self, path: BagPath, storage: Storage, plan: ReadPlan) -> BagInfo:
+        """The open bag's facts; keeps what its index promises per topic (:meth:`_check_counts`)."""
         counts: dict[str, tuple[str, int]] = {}
         for conn in self._reader.connections:
             topic = global_topic(conn.topic)
@@ -153,12 +175,11 @@ class RosbagsReader:
             counts[topic] = (msgtype, count + int(conn.msgcount))
         self._promised = {topic: count for topic, (_, count) in counts.items()}
         message_count = int(self._reader.message_count)
-        size_bytes = sum(p.stat().st_size for p in plan.files)
-        self._info = BagInfo(
-            uri=uri,
+        return BagInfo(
+            uri=self._uri,
             storage=storage,
             files=tuple(sorted(p.name for p in plan.files)),
-            size_bytes=size_bytes,
+            size_bytes=sum(p.stat().st_size for p in plan.files),
             start_ns=int(self._reader.start_time) if message_count else 0,
             end_ns=int(self._reader.end_time) if message_count else 0,
             message_count=message_count,
@@ -167,14 +188,6 @@ class RosbagsReader:
             checksums=bag_checksums(storage, plan.data_files),
             warnings=(*plan.warnings, *self._reader.warnings()),
         )
-        self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
-        self._lacking = lacking
-        if remote is not None:
-            self._transfer = remote.stats
-        elif cleanup is not None:
-            self._transfer = TransferStats("download", bytes_read=size_bytes, requests=len(plan.files))
-        else:
-            self._transfer = TransferStats("local")
 
     @property
     def transfer(self) -> TransferStats:

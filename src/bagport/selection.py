@@ -96,12 +96,7 @@ def select_episodes(
         f for f in failures if keep_labelled or f.label not in EXCLUDED_LABELS
     ]  # a failed demonstration that could not be converted either is left out by its label
     if policy == "fail_run" and (failing or failed):
-        lines = [f"- bags[{entry}] {qa.bag_uri}: {qa.headline()}" for entry, qa in failing]
-        lines += [f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failed]
-        raise QualityError(
-            f"{len(lines)} of {len(rows)} bag(s) {QualityError.MARKER} and on_fail is 'fail_run'; nothing was "
-            f"written at {output}.\n" + "\n".join(lines),
-        )
+        raise _fail_run_error(failing, failed, len(rows), output)
     kept: list[EpisodeSummary] = []
     entries: list[QAEntry] = []
     for (_, base, summary, episode), labelled in zip(rows, by_label, strict=True):
@@ -126,12 +121,27 @@ def select_episodes(
         )
     if not kept and not appending:
         # (an append still records the exclusions, so an unchanged bad bag is not retried by every run)
-        reasons = "\n".join(
-            f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries
-        )
-        raise QualityError(
-            f"no episode is left to write: all {len(entries)} bag(s) {QualityError.MARKER}.\n{reasons}\n"
-            "Fix: look at the reasons above; relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep "
-            "failing episodes (--keep-failed keeps episodes labelled failed or discarded)."
-        )
+        raise _nothing_kept_error(entries)
     return kept, entries
+
+
+def _fail_run_error(
+    failing: Sequence[tuple[int, EpisodeQA]], failed: Sequence[EpisodeFailure], bags: int, output: str
+) -> QualityError:
+    """``on_fail: fail_run`` with episodes failing QA (``failing``: manifest entry, QA) or not converted."""
+    lines = [f"- bags[{entry}] {qa.bag_uri}: {qa.headline()}" for entry, qa in failing]
+    lines += [f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failed]
+    return QualityError(
+        f"{len(lines)} of {bags} bag(s) {QualityError.MARKER} and on_fail is 'fail_run'; nothing was "
+        f"written at {output}.\n" + "\n".join(lines),
+    )
+
+
+def _nothing_kept_error(entries: Sequence[QAEntry]) -> QualityError:
+    """Every bag was left out (a new dataset would be empty): each one's reason, and what to change."""
+    reasons = "\n".join(f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries)
+    return QualityError(
+        f"no episode is left to write: all {len(entries)} bag(s) {QualityError.MARKER}.\n{reasons}\n"
+        "Fix: look at the reasons above; relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep "
+        "failing episodes (--keep-failed keeps episodes labelled failed or discarded)."
+    )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import socket
@@ -10,7 +11,10 @@ import ssl
 import time
 import urllib.error
 import urllib.request
+import uuid
+from datetime import UTC, datetime, timedelta
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -275,3 +279,65 @@ def test_the_loopback_ca_file_is_set_for_the_temporary_server_only(
             server.stop(graceful=False)
         assert os.environ.get("PREFECT_API_SSL_CERT_FILE") == users
         assert "PREFECT_API_URL" not in os.environ
+
+
+def _post_json(api_url: str, path: str, body: object) -> Any:
+    request = urllib.request.Request(
+        f"{api_url}{path}", data=json.dumps(body).encode(), headers={"Content-Type": "application/json"}
+    )
+    with urllib.request.urlopen(request, timeout=30) as response:
+        data = response.read()
+    return json.loads(data) if data else None
+
+
+def _test_events(api_url: str, prefix: str) -> list[str]:
+    now = datetime.now(UTC)
+    window = {"since": (now - timedelta(days=30)).isoformat(), "until": now.isoformat()}
+    body = {"filter": {"occurred": window, "event": {"prefix": [prefix]}}, "limit": 50}
+    return sorted(e["event"] for e in _post_json(api_url, "/events/filter", body)["events"])
+
+
+def _until(api_url: str, expected: list[str], prefix: str, timeout_s: float = 30) -> list[str]:
+    deadline = time.monotonic() + timeout_s
+    while (seen := _test_events(api_url, prefix)) != expected and time.monotonic() < deadline:
+        time.sleep(0.5)
+    return seen
+
+
+@pytest.mark.slow
+def test_each_start_of_the_temporary_server_prunes_events_past_their_retention() -> None:
+    """What docs/operations.md says of ``$PREFECT_HOME/prefect.db``: Prefect's event vacuum runs in the
+    temporary server too, once as it starts, so events older than the retention (7 days) do not pile up
+    under a job that runs every hour on the embedded default. (The suite's own ``PREFECT_HOME``, whose
+    database is migrated already: a new one costs each boot ~10 s more; the events are this test's alone.)"""
+    prefix = f"bagport.test.{uuid.uuid4().hex}."
+    old, recent = f"{prefix}old", f"{prefix}recent"
+    # stored at the event persister's next flush (every 5 s by default)
+    settings = {"PREFECT_SERVER_SERVICES_EVENT_PERSISTER_FLUSH_INTERVAL": "0.5"}
+    now = datetime.now(UTC)
+
+    def event(name: str, age: timedelta) -> dict[str, Any]:
+        occurred = (now - age).isoformat()
+        return {
+            "id": str(uuid.uuid4()),
+            "occurred": occurred,
+            "event": name,
+            "resource": {"prefect.resource.id": "t"},
+        }
+
+    server = LocalServer(settings)
+    try:
+        server.wait_ready(120)
+        _post_json(
+            server.api_url, "/events", [event(old, timedelta(days=10)), event(recent, timedelta(hours=1))]
+        )
+        # both stored: this start's vacuum ran before they came
+        assert _until(server.api_url, [old, recent], prefix) == [old, recent]
+    finally:
+        server.stop()
+    server = LocalServer(settings)
+    try:
+        server.wait_ready(120)
+        assert _until(server.api_url, [recent], prefix) == [recent]
+    finally:
+        server.stop()

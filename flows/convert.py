@@ -73,65 +73,20 @@ def _label(uri: str) -> str:
 def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
     plan = _checked_plan(config) or plan_task(config)
-    if plan.up_to_date:  # the same write key as the dataset at the output: nothing to convert or write
-        logger.info(
-            "up to date: %d episode(s) reused, nothing to write at %s", len(plan.reused), config.output
-        )
-        Progress(0, len(plan.reused))
-        unchanged = finish_up_to_date(plan)
-        publish_run_artifacts(unchanged)
-        return unchanged
-    if not plan.requests and not plan.reused:  # an append or ingestion run with nothing new
-        logger.info(
-            "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
-        )
-        return dataset_report(config.output)
+    finished = _nothing_to_convert(plan)
+    if finished is not None:
+        return finished
     episodes = _Episodes(plan)
     if plan.reused:
         logger.info(
             "%d episode(s) staged already with the same key: not converted again; %d bag(s) to convert",
             len(plan.reused), len(plan.requests),
         )  # fmt: skip
-    failures: list[EpisodeFailure] = []
-    if segments_bags(plan.contract):
-        # Each bag's episodes start converting as soon as that bag is split, while the others are.
-        segmenting = [_submit_segment(plan, request) for request in plan.requests]
-        position = {id(f): i for i, f in enumerate(segmenting)}
-        for done in as_completed(segmenting):
-            bag = plan.requests[position[id(done)]]
-            found, failure = _segments_of(bag, done)
-            episodes.submit(position[id(done)], found)
-            if failure is None:
-                continue
-            failures.append(failure)
-            if config.fail_fast:
-                unfinished = cancel_unfinished(segmenting) + cancel_unfinished(episodes.futures)
-                message = (
-                    f"bags[{failure.manifest_entry}] {failure.bag_uri} could not be split into episodes "
-                    f"({failure.error}) and --fail-fast is set: the run stopped ({unfinished} task(s) were not "
-                    f"finished) and nothing was written at {config.output}. Fix: correct or remove that bag, or "
-                    "leave out --fail-fast to convert the others and list the failures."
-                )
-                logger.error("%s", message)
-                return Failed(message=message, data=ConversionError(message))
-    else:
-        episodes.submit_bags(plan.requests)
-    unsegmented = len(failures)  # bags that could not even be split into episodes
-    for done in as_completed(episodes.futures):
-        done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
-        outcomes = episodes.outcomes(done)
-        episodes.progress.advance(len(outcomes))
-        stop = _fail_fast_reason(plan, outcomes) if config.fail_fast else None
-        if stop is not None:
-            unfinished = episodes.cancel_unfinished()
-            message = (
-                f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {episodes.count} "
-                f"episode(s) were not finished) and nothing was written at {config.output}. Finished episodes "
-                f"stay in the staging store {config.resolved_staging()} and a re-run reuses them. Fix: correct "
-                "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
-            )
-            logger.error("%s", message)
-            return Failed(message=message, data=ConversionError(message))
+    failures: list[EpisodeFailure] = []  # bags that could not even be split into episodes, so far
+    stopped = _submit_episodes(plan, episodes, failures) or _wait_for_episodes(plan, episodes)
+    if stopped is not None:  # --fail-fast
+        return stopped
+    unsegmented = len(failures)
     staged = list(episodes.reused)
     for request, error in episodes.in_plan_order():
         if error is None:
@@ -154,6 +109,77 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         return report
     publish_run_artifacts(report)
     return completed_state(report)  # "Completed with exclusions" in run lists when bags were left out
+
+
+def _nothing_to_convert(plan: RunPlan) -> DatasetReport | None:
+    """The report of a run with nothing to convert (up to date, or nothing new to append); else ``None``."""
+    logger, config = get_run_logger(), plan.config
+    if plan.up_to_date:  # the same write key as the dataset at the output: nothing to convert or write
+        logger.info(
+            "up to date: %d episode(s) reused, nothing to write at %s", len(plan.reused), config.output
+        )
+        Progress(0, len(plan.reused))
+        unchanged = finish_up_to_date(plan)
+        publish_run_artifacts(unchanged)
+        return unchanged
+    if not plan.requests and not plan.reused:  # an append or ingestion run with nothing new
+        logger.info(
+            "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
+        )
+        return dataset_report(config.output)
+    return None
+
+
+def _submit_episodes(plan: RunPlan, episodes: _Episodes, failures: list[EpisodeFailure]) -> State[Any] | None:
+    """Submit every bag's episodes: at once, or, when the contract splits bags, each bag's as soon as it is
+    split (while the others are). A bag that cannot be split is added to ``failures``; with ``--fail-fast``
+    it stops the run (the Failed state returned)."""
+    if not segments_bags(plan.contract):
+        episodes.submit_bags(plan.requests)
+        return None
+    config = plan.config
+    segmenting = [_submit_segment(plan, request) for request in plan.requests]
+    position = {id(f): i for i, f in enumerate(segmenting)}
+    for done in as_completed(segmenting):
+        bag = plan.requests[position[id(done)]]
+        found, failure = _segments_of(bag, done)
+        episodes.submit(position[id(done)], found)
+        if failure is None:
+            continue
+        failures.append(failure)
+        if config.fail_fast:
+            unfinished = cancel_unfinished(segmenting) + cancel_unfinished(episodes.futures)
+            message = (
+                f"bags[{failure.manifest_entry}] {failure.bag_uri} could not be split into episodes "
+                f"({failure.error}) and --fail-fast is set: the run stopped ({unfinished} task(s) were not "
+                f"finished) and nothing was written at {config.output}. Fix: correct or remove that bag, or "
+                "leave out --fail-fast to convert the others and list the failures."
+            )
+            get_run_logger().error("%s", message)
+            return Failed(message=message, data=ConversionError(message))
+    return None
+
+
+def _wait_for_episodes(plan: RunPlan, episodes: _Episodes) -> State[Any] | None:
+    """Follow the episodes' task runs as they finish (the progress artifact); with ``--fail-fast``, the
+    first failure (or QA fail under ``fail_run``) cancels the rest and stops the run (the Failed state)."""
+    config = plan.config
+    for done in as_completed(episodes.futures):
+        done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
+        outcomes = episodes.outcomes(done)
+        episodes.progress.advance(len(outcomes))
+        stop = _fail_fast_reason(plan, outcomes) if config.fail_fast else None
+        if stop is not None:
+            unfinished = episodes.cancel_unfinished()
+            message = (
+                f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {episodes.count} "
+                f"episode(s) were not finished) and nothing was written at {config.output}. Finished episodes "
+                f"stay in the staging store {config.resolved_staging()} and a re-run reuses them. Fix: correct "
+                "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
+            )
+            get_run_logger().error("%s", message)
+            return Failed(message=message, data=ConversionError(message))
+    return None
 
 
 class _Episodes:

@@ -286,49 +286,7 @@ def compile_contract(
         _check_frames(src, section, source_name)
         grouped.setdefault(src.key, []).append((src, entry.dtype))
 
-    features = []
-    for key, group in grouped.items():
-        sources = tuple(src for src, _ in group)
-        image_flags = {src.msgtype in IMAGE_TYPES for src in sources}
-        if image_flags == {True}:
-            if len(sources) > 1:
-                topics = ", ".join(src.topic for src in sources)
-                raise ContractError(
-                    f"image key {key!r} is declared on several topics ({topics})",
-                    file=source_name,
-                    line=sources[1].line,
-                    field=key,
-                    fix="give each camera its own key, e.g. observation.images.front and observation.images.wrist.",
-                )
-            features.append(FeatureSpec(key, FeatureKind.VIDEO, "video", sources))
-            continue
-        if image_flags == {True, False}:
-            raise ContractError(
-                f"key {key!r} mixes image topics and numeric topics",
-                file=source_name,
-                line=sources[-1].line,
-                field=key,
-                fix="use separate keys for images and for numeric data.",
-            )
-        dtypes = {dtype for _, dtype in group if dtype}
-        if len(dtypes) > 1:
-            raise ContractError(
-                f"entries of key {key!r} ask for different dtypes {sorted(dtypes)}",
-                file=source_name,
-                line=sources[-1].line,
-                field=f"{key}.dtype",
-                fix="use one dtype for every entry of a key.",
-            )
-        dtype = dtypes.pop() if dtypes else DEFAULT_VECTOR_DTYPE
-        if dtype not in _NUMERIC_DTYPES:
-            raise ContractError(
-                f"dtype {dtype!r} of key {key!r} is not a numeric dtype",
-                file=source_name,
-                line=sources[0].line,
-                field=f"{key}.dtype",
-                fix=f"use one of {sorted(_NUMERIC_DTYPES)}.",
-            )
-        features.append(FeatureSpec(key, FeatureKind.VECTOR, dtype, sources))
+    features = [_feature(key, group, source_name) for key, group in grouped.items()]
     if contract.clock is not None and contract.clock not in grouped:
         raise ContractError(
             f"clock {contract.clock!r} is not a feature key of this contract",
@@ -343,6 +301,51 @@ def compile_contract(
         task_topics=contract.tasks,
         episode_lines=_episode_lines(line_of),
     )
+
+
+def _feature(key: str, group: list[tuple[SourceSpec, str | None]], source_name: str) -> FeatureSpec:
+    """The feature of one key from its sources (with each entry's dtype): a camera (one image topic) or a
+    numeric vector of one numeric dtype."""
+    sources = tuple(src for src, _ in group)
+    image_flags = {src.msgtype in IMAGE_TYPES for src in sources}
+    if image_flags == {True}:
+        if len(sources) > 1:
+            topics = ", ".join(src.topic for src in sources)
+            raise ContractError(
+                f"image key {key!r} is declared on several topics ({topics})",
+                file=source_name,
+                line=sources[1].line,
+                field=key,
+                fix="give each camera its own key, e.g. observation.images.front and observation.images.wrist.",
+            )
+        return FeatureSpec(key, FeatureKind.VIDEO, "video", sources)
+    if image_flags == {True, False}:
+        raise ContractError(
+            f"key {key!r} mixes image topics and numeric topics",
+            file=source_name,
+            line=sources[-1].line,
+            field=key,
+            fix="use separate keys for images and for numeric data.",
+        )
+    dtypes = {dtype for _, dtype in group if dtype}
+    if len(dtypes) > 1:
+        raise ContractError(
+            f"entries of key {key!r} ask for different dtypes {sorted(dtypes)}",
+            file=source_name,
+            line=sources[-1].line,
+            field=f"{key}.dtype",
+            fix="use one dtype for every entry of a key.",
+        )
+    dtype = dtypes.pop() if dtypes else DEFAULT_VECTOR_DTYPE
+    if dtype not in _NUMERIC_DTYPES:
+        raise ContractError(
+            f"dtype {dtype!r} of key {key!r} is not a numeric dtype",
+            file=source_name,
+            line=sources[0].line,
+            field=f"{key}.dtype",
+            fix=f"use one of {sorted(_NUMERIC_DTYPES)}.",
+        )
+    return FeatureSpec(key, FeatureKind.VECTOR, dtype, sources)
 
 
 def _episode_lines(line_of: LineOf | None) -> dict[str, int]:

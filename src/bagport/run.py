@@ -74,15 +74,8 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     contract_text = read_text(config.contract, "contract")
     contract = parse_contract(contract_text, config.contract)
     encoder = EncoderSettings.from_dict(config.encoder)
-    qa = load_qa_config(read_text(config.qa, "qa") if config.qa else None, config.qa or "qa.yaml")
-    if config.on_qa_fail is not None:
-        qa = qa.model_copy(update={"on_fail": config.on_qa_fail})
-    glob_manifest = config.manifest_text()
-    if glob_manifest is not None:
-        manifest = parse_manifest(*glob_manifest)
-    else:
-        assert config.manifest is not None  # the config validates that one of the two is given
-        manifest = load_manifest(config.manifest)
+    qa = _qa_config(config)
+    manifest = _manifest(config)
     fs, out_path = url_to_fs(config.output)
     require_bucket(fs, out_path, config.output)
     staging = config.resolved_staging()
@@ -127,6 +120,21 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     )
     plan = RunPlan(config, contract, manifest, requests, contract_text, qa)
     return _mark_up_to_date(_take_staged(plan, stamp_of)) if reuse else plan
+
+
+def _qa_config(config: ConvertConfig) -> QAConfig:
+    """The run's QA settings: ``--qa``'s file (bagport's defaults without one), ``--on-qa-fail`` over it."""
+    qa = load_qa_config(read_text(config.qa, "qa") if config.qa else None, config.qa or "qa.yaml")
+    return qa if config.on_qa_fail is None else qa.model_copy(update={"on_fail": config.on_qa_fail})
+
+
+def _manifest(config: ConvertConfig) -> Manifest:
+    """The run's bags: ``--manifest``'s file, or the bags ``--bags`` matches."""
+    glob_manifest = config.manifest_text()
+    if glob_manifest is not None:
+        return parse_manifest(*glob_manifest)
+    assert config.manifest is not None  # the config validates that one of the two is given
+    return load_manifest(config.manifest)
 
 
 def _take_staged(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:

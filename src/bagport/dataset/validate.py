@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from bagport.dataset.checksums import verify_checksums
 from bagport.dataset.invariants import check_invariants
@@ -48,40 +49,13 @@ def validate_dataset(
         )
     info = check_invariants(path)
     checked = verify_checksums(path)
-    os.environ.setdefault("HF_HUB_OFFLINE", "1")
-    try:
-        from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - optional, heavy
-    except ImportError as err:
-        raise ValidationError(
-            "the lerobot package is not installed, so the dataset cannot be loaded by LeRobot. "
-            "Fix: install bagport with the 'lerobot' extra (the README's set-up command does)."
-        ) from err
-    try:
-        dataset = LeRobotDataset(repo_id or f"local/{path.name}", root=path, video_backend=video_backend())
-    except Exception as err:
-        raise ValidationError(
-            f"{path}: LeRobotDataset failed to load it: {type(err).__name__}: {err}"
-        ) from err
+    dataset = _load_with_lerobot(path, repo_id)
     total = len(dataset)
     if total != info["total_frames"]:
         raise ValidationError(f"{path}: LeRobot sees {total} frames, info.json says {info['total_frames']}")
     video_keys = tuple(dataset.meta.video_keys)
     indices = _indices(dataset, decode_every)
-    for n, index in enumerate(indices):
-        try:
-            item = dataset[index]
-        except Exception as err:
-            raise ValidationError(
-                f"{path}: LeRobot failed to read frame index={index}: {type(err).__name__}: {err}"
-            ) from err
-        for key in video_keys:
-            frame = item[key]
-            if tuple(frame.shape[-2:]) != tuple(info["features"][key]["shape"][:2]):
-                raise ValidationError(
-                    f"{path}: frame {index} of {key} decoded with shape {tuple(frame.shape)}"
-                )
-        if progress is not None:
-            progress(n + 1, len(indices))
+    _decode_frames(path, dataset, indices, info, progress)
     return ValidationReport(
         str(path),
         dataset.meta.total_episodes,
@@ -91,6 +65,49 @@ def validate_dataset(
         str(dataset._video_backend),
         checked,
     )
+
+
+def _load_with_lerobot(path: Path, repo_id: str | None) -> Any:
+    """The dataset as LeRobot's own loader opens it, offline (``HF_HUB_OFFLINE``)."""
+    os.environ.setdefault("HF_HUB_OFFLINE", "1")
+    try:
+        from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - optional, heavy
+    except ImportError as err:
+        raise ValidationError(
+            "the lerobot package is not installed, so the dataset cannot be loaded by LeRobot. "
+            "Fix: install bagport with the 'lerobot' extra (the README's set-up command does)."
+        ) from err
+    try:
+        return LeRobotDataset(repo_id or f"local/{path.name}", root=path, video_backend=video_backend())
+    except Exception as err:
+        raise ValidationError(
+            f"{path}: LeRobotDataset failed to load it: {type(err).__name__}: {err}"
+        ) from err
+
+
+def _decode_frames(
+    path: Path,
+    dataset: Any,
+    indices: Sequence[int],
+    info: dict[str, Any],
+    progress: Callable[[int, int], None] | None,
+) -> None:
+    """Read the frames at ``indices`` through LeRobot, each camera's decoded at the shape ``info`` gives."""
+    for n, index in enumerate(indices):
+        try:
+            item = dataset[index]
+        except Exception as err:
+            raise ValidationError(
+                f"{path}: LeRobot failed to read frame index={index}: {type(err).__name__}: {err}"
+            ) from err
+        for key in dataset.meta.video_keys:
+            frame = item[key]
+            if tuple(frame.shape[-2:]) != tuple(info["features"][key]["shape"][:2]):
+                raise ValidationError(
+                    f"{path}: frame {index} of {key} decoded with shape {tuple(frame.shape)}"
+                )
+        if progress is not None:
+            progress(n + 1, len(indices))
 
 
 def video_backend() -> str:

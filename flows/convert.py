@@ -102,8 +102,7 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
             "\n".join(f"- bags[{f.manifest_entry}] {f.bag_uri}: {f.error}" for f in failures),
         )
     logger.info("%d episode(s) staged; writing the dataset", len(staged))
-    # one task per output file, then the commit (flows/reduce.py); a failure's error travels as the
-    # state's data: the CLI picks its exit code by its type
+    # a task per output file, then the commit (flows/reduce.py); an error is the state's data (its exit code)
     report = reduce_dataset(plan, staged, failures)
     if not isinstance(report, DatasetReport):
         return report
@@ -131,9 +130,8 @@ def _nothing_to_convert(plan: RunPlan) -> DatasetReport | None:
 
 
 def _submit_episodes(plan: RunPlan, episodes: _Episodes, failures: list[EpisodeFailure]) -> State[Any] | None:
-    """Submit every bag's episodes: at once, or, when the contract splits bags, each bag's as soon as it is
-    split (while the others are). A bag that cannot be split is added to ``failures``; with ``--fail-fast``
-    it stops the run (the Failed state returned)."""
+    """Submit every bag's episodes: at once, or each bag's as soon as it is split (the others meanwhile). A bag
+    that cannot be split goes to ``failures``; with ``--fail-fast`` it stops the run (its Failed state)."""
     if not segments_bags(plan.contract):
         episodes.submit_bags(plan.requests)
         return None
@@ -149,20 +147,17 @@ def _submit_episodes(plan: RunPlan, episodes: _Episodes, failures: list[EpisodeF
         failures.append(failure)
         if config.fail_fast:
             unfinished = cancel_unfinished(segmenting) + cancel_unfinished(episodes.futures)
-            message = (
+            return _stopped(
                 f"bags[{failure.manifest_entry}] {failure.bag_uri} could not be split into episodes "
                 f"({failure.error}) and --fail-fast is set: the run stopped ({unfinished} task(s) were not "
-                f"finished) and nothing was written at {config.output}. Fix: correct or remove that bag, or "
-                "leave out --fail-fast to convert the others and list the failures."
+                f"finished) and nothing was written at {config.output}."
             )
-            get_run_logger().error("%s", message)
-            return Failed(message=message, data=ConversionError(message))
     return None
 
 
 def _wait_for_episodes(plan: RunPlan, episodes: _Episodes) -> State[Any] | None:
-    """Follow the episodes' task runs as they finish (the progress artifact); with ``--fail-fast``, the
-    first failure (or QA fail under ``fail_run``) cancels the rest and stops the run (the Failed state)."""
+    """Follow the episodes as they finish; with ``--fail-fast`` a failure (or a QA fail under ``fail_run``)
+    cancels the rest and stops the run (its Failed state)."""
     config = plan.config
     for done in as_completed(episodes.futures):
         done.wait()  # records the final state on the future; `.state` would otherwise ask the API, which lags
@@ -171,15 +166,22 @@ def _wait_for_episodes(plan: RunPlan, episodes: _Episodes) -> State[Any] | None:
         stop = _fail_fast_reason(plan, outcomes) if config.fail_fast else None
         if stop is not None:
             unfinished = episodes.cancel_unfinished()
-            message = (
+            return _stopped(
                 f"{stop} and --fail-fast is set: the run stopped ({unfinished} of {episodes.count} "
                 f"episode(s) were not finished) and nothing was written at {config.output}. Finished episodes "
-                f"stay in the staging store {config.resolved_staging()} and a re-run reuses them. Fix: correct "
-                "or remove that bag, or leave out --fail-fast to convert the others and list the failures."
+                f"stay in the staging store {config.resolved_staging()} and a re-run reuses them."
             )
-            get_run_logger().error("%s", message)
-            return Failed(message=message, data=ConversionError(message))
     return None
+
+
+def _stopped(what: str) -> State[Any]:
+    """The Failed state of a run ``--fail-fast`` stopped (``what`` happened), logged with the fix."""
+    message = (
+        f"{what} Fix: correct or remove that bag, or leave out --fail-fast to convert the others and "
+        "list the failures."
+    )
+    get_run_logger().error("%s", message)
+    return Failed(message=message, data=ConversionError(message))
 
 
 class _Episodes:

@@ -97,8 +97,13 @@ def cmd_validate(args: argparse.Namespace) -> int:
         if done == total or done % 200 == 0:
             print(f"\rdecoded {done}/{total} frames", end="", file=sys.stderr, flush=True)
 
-    report = validate_dataset(args.root, repo_id=args.repo_id, decode_every=args.every, progress=progress)
-    print(file=sys.stderr)
+    # a count redrawn in place on a terminal only: in a job's log each redraw would be one run-on line
+    on_terminal = sys.stderr.isatty()
+    report = validate_dataset(
+        args.root, repo_id=args.repo_id, decode_every=args.every, progress=progress if on_terminal else None
+    )
+    if on_terminal:
+        print(file=sys.stderr)
     print(
         f"OK {report.root}: {report.episodes} episode(s), {report.frames} frames, "
         f"{report.frames_decoded} decoded through LeRobot ({report.video_backend}); videos: "

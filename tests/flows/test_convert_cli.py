@@ -60,7 +60,9 @@ def test_validate_cli_passes_with_lerobot(
 ) -> None:
     _, out = converted
     assert main(["validate", str(out), "--repo-id", "test/sample"]) == 0
-    assert f"{EPISODES} episode(s)" in capfd.readouterr().out
+    printed = capfd.readouterr()
+    assert f"{EPISODES} episode(s)" in printed.out
+    assert "\r" not in printed.err and "decoded" not in printed.err  # not a terminal: no count redrawn
 
 
 def test_lerobot_loads_every_frame_with_true_values_and_colours(converted: tuple[Path, Path]) -> None:

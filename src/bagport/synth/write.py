@@ -345,6 +345,7 @@ def write_sample_fleet(
             start_ns=1_700_000_000_000_000_000 + index * 3_600 * NS,
             seed=seed + index,
             task=_TASKS[index % len(_TASKS)],
+            mcap_crcs=storage == "mcap",  # as `ros2 bag record` writes MCAP: chunk CRCs for reads to check
         )
         if cameras is not None:
             spec = replace(spec, cameras=cameras)

@@ -74,3 +74,6 @@ def test_sample_fleet_cycles_storages_and_writes_a_manifest(tmp_path: Path) -> N
     assert "uri: episode_002.bag" in text
     with open_bag(str(paths[1])) as reader:
         assert reader.info.custom_data["lerobot.operator_prompt"] == "place the cube in the bin"
+    for path in (paths[0], paths[3]):  # MCAP as `ros2 bag record` writes it: every read checked by CRC
+        with open_bag(str(path)) as reader:
+            assert reader.info.checksums is not None and reader.info.checksums.checked

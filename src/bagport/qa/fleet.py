@@ -62,6 +62,12 @@ _BREAKDOWN_ROWS = 30
 _REASON_CHARS = 90
 
 
+def _clipped(text: str, limit: int) -> str:
+    """``text`` in at most ``limit`` characters, a cut one ending in an ellipsis (the whole reason is on the
+    episode's detail page)."""
+    return text if len(text) <= limit else text[: limit - 1].rstrip() + "\u2026"
+
+
 def detail_path(run: int, position: int) -> str:
     """A detail page's path under ``meta/qa/`` (the script builds the same)."""
     return f"details/run-{run:03d}/{position:06d}.html"
@@ -152,7 +158,7 @@ def _worst(rows: list[dict[str, Any]]) -> str:
     lines = [
         [f'<a href="{detail_path(r["run"], r["position"])}">{escape(r["name"])}</a>',
          "excluded" if r["episode_index"] is None else r["episode_index"], r["run"], f"{r['score']:.2f}",
-         f'<span class="{r["verdict"]}">{r["verdict"]}</span>', escape(r["reason"][:200])]
+         f'<span class="{r["verdict"]}">{r["verdict"]}</span>', escape(_clipped(r["reason"], 200))]
         for r in worst[:_WORST]
     ]  # fmt: skip
     if not lines:
@@ -171,7 +177,7 @@ def _data(rows: list[dict[str, Any]]) -> str:
         [r["run"], r["episode_index"], r["name"], round(r["score"], 3), _VERDICTS.index(r["verdict"]),
          int(r["excluded"]), [ref("checks", c) for c in r["fails"]], [ref("checks", c) for c in r["warns"]],
          ref("folders", r["folder"]), ref("days", r["day"]), ref("robots", r["robot_type"]), int(r["detail"]),
-         r["position"], r["reason"][:_REASON_CHARS] if r["verdict"] != "pass" else ""]
+         r["position"], _clipped(r["reason"], _REASON_CHARS) if r["verdict"] != "pass" else ""]
         for r in rows
     ]  # fmt: skip
     payload = {kind: list(values) for kind, values in lists.items()} | {"rows": data}

@@ -9,6 +9,7 @@ import json
 import re
 import shutil
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -18,6 +19,7 @@ from playwright.sync_api import Browser, Page, sync_playwright
 from bagport.dataset.qa import QA_INDEX_PATH, write_qa
 from bagport.episode import EpisodeRequest, convert_episode
 from bagport.qa import EpisodeQA, QAEntry
+from bagport.qa.fleet import index_table, render_fleet_page
 from bagport.synth import EpisodeSpec, Faults, Window, write_episode_bag
 from bagport.synth.qa_entries import synth_qa_entries
 from tests.helpers import FAST_SETTINGS, SAMPLE_CONTRACT, SMALL_CAMERAS
@@ -169,3 +171,21 @@ def test_passing_episodes_have_no_detail_page(report: Path) -> None:
     details = report.parent / "details"
     index = _index(report)
     assert len(list(details.rglob("*.html"))) == sum(r["verdict"] != "pass" for r in index)
+
+
+def test_a_long_reason_is_cut_with_an_ellipsis_and_a_short_one_is_whole() -> None:
+    """The worst-episodes table (200 characters) and the episode table's data (90) cut a long reason
+    visibly: the whole one is on the episode's detail page."""
+    entries = [e for e in synth_qa_entries(40, seed=3) if e.qa.verdict != "pass"][:2]
+    long_reason = "excluded by QA: " + " ".join(f"check{n} failed" for n in range(60))
+    entries[0] = replace(entries[0], excluded_reason=long_reason, episode_index=None)
+    entries[1] = replace(entries[1], excluded_reason="short reason", episode_index=None)
+    html = render_fleet_page(index_table(entries, 0, "arm"), {"episodes": 2}, 0)
+    assert long_reason not in html and "short reason" in html
+    worst = re.search(r"worst episodes</h2>(.*?)</table>", html, re.S)
+    assert worst is not None and long_reason[:150] in worst.group(1) and "\u2026</td>" in worst.group(1)
+    data = re.search(r"id='qa-data'>(.*?)</script>", html, re.S)
+    assert data is not None
+    payload = json.loads(data.group(1).replace("<\\/", "</"))
+    reasons = sorted(row[-1] for row in payload["rows"])
+    assert reasons[0].endswith("\u2026") and len(reasons[0]) == 90 and reasons[1] == "short reason"

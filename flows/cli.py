@@ -31,8 +31,10 @@ __all__ = ["build_parser", "main"]
 def _progress_bar(done: int, total: int) -> None:
     width = 30
     filled = width * done // max(total, 1)
+    # the reduce follows the last episode (seconds for a fleet's thousands): the bar says so, not a stall
+    then = "; writing the dataset ..." if done >= total else ""
     print(
-        f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} episodes",
+        f"\r[{'#' * filled}{'.' * (width - filled)}] {done}/{total} episodes{then}",
         end="",
         file=sys.stderr,
         flush=True,

@@ -149,6 +149,10 @@ def test_progress_bar_and_loudness_flags(capfd: pytest.CaptureFixture[str]) -> N
 
     _progress_bar(3, 12)
     assert capfd.readouterr().err == "\r[#######.......................] 3/12 episodes"
+    _progress_bar(12, 12)
+    assert (
+        capfd.readouterr().err == "\r[##############################] 12/12 episodes; writing the dataset ..."
+    )
     with pytest.raises(SystemExit) as info:
         main(["convert", "--manifest", "m", "--contract", "c", "--output", "o", "--quiet", "--verbose"])
     assert info.value.code == 2

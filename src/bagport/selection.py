@@ -138,10 +138,17 @@ def _fail_run_error(
 
 
 def _nothing_kept_error(entries: Sequence[QAEntry]) -> QualityError:
-    """Every bag was left out (a new dataset would be empty): each one's reason, and what to change."""
+    """Every bag was left out (a new dataset would be empty): each one's reason, and what to change for the
+    reasons there are (a conversion error is fixed at its cause: no QA setting keeps a bag that failed)."""
     reasons = "\n".join(f"- bags[{e.manifest_entry}] {e.qa.bag_uri}: {e.excluded_reason}" for e in entries)
+    fixes = []
+    if any(e.qa.error is not None and not e.by_label for e in entries):
+        fixes.append("correct what each conversion error above names (each ends with its own fix)")
+    if any(e.qa.error is None and not e.by_label for e in entries):
+        fixes.append("relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep failing episodes")
+    if any(e.by_label for e in entries):
+        fixes.append("pass --keep-failed to keep episodes labelled failed or discarded")
     return QualityError(
         f"no episode is left to write: all {len(entries)} bag(s) {QualityError.MARKER}.\n{reasons}\n"
-        "Fix: look at the reasons above; relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep "
-        "failing episodes (--keep-failed keeps episodes labelled failed or discarded)."
+        f"Fix: {'; '.join(fixes)}."
     )

@@ -111,6 +111,20 @@ def test_nothing_left_is_an_error_that_says_how_to_fix_it(fleet: Path, tmp_path:
         reduce_run(plan_run(config), staged[1:2])
 
 
+def test_nothing_left_after_conversion_errors_points_at_them_not_at_qa_settings(
+    fleet: Path, tmp_path: Path
+) -> None:
+    """No QA setting keeps a bag that failed to convert: the fix is the error's own (a contract's topic
+    typo fails every bag the same way, and --on-qa-fail keep would change nothing)."""
+    config, _ = _run(fleet, tmp_path / "ds")
+    failure = EpisodeFailure(str(fleet / "gone"), 3, "gone: bag does not exist")
+    with pytest.raises(QualityError) as info:
+        reduce_run(plan_run(config), [], [failure])
+    text = str(info.value)
+    assert "conversion failed: gone: bag does not exist" in text
+    assert "correct what each conversion error above names" in text and "--on-qa-fail" not in text
+
+
 def test_a_broken_bag_arriving_alone_is_recorded_excluded_and_not_retried(tmp_path: Path) -> None:
     """Finding 4 of issue 16: an append whose only new bag fails records the exclusion (the next
     scheduled run skips the unchanged bag) instead of failing with "no episode is left"."""

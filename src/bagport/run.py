@@ -119,7 +119,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         if not done or (bag.uri, stamp_of(bag.uri)) not in done
     )
     plan = RunPlan(config, contract, manifest, requests, contract_text, qa)
-    return _mark_up_to_date(_take_staged(plan, stamp_of)) if reuse else plan
+    return _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
 
 
 def _qa_config(config: ConvertConfig) -> QAConfig:
@@ -187,21 +187,34 @@ def write_key(
     return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
 
 
-def _mark_up_to_date(plan: RunPlan) -> RunPlan:
-    """The plan marked up to date when it converts nothing and the dataset at the output (replaced
-    with ``--overwrite``; LeRobot only) was written with the same key: such a re-run costs the plan."""
+def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
+    """The plan marked up to date when the dataset at the output (replaced with ``--overwrite``; LeRobot
+    only) was written with the key this run would write: such a re-run costs the plan.
+
+    The key holds each episode's id (bag, contract, encoder, window) and its bag's stamp, so episodes no
+    longer staged (a run without ``--keep-staging`` removed them) are judged by their bag's stamp now: an
+    unchanged fleet is up to date without its staging, a changed bag is not (its stamp differs). A
+    contract that splits bags into episodes is written again (its episodes are known once split, in the flow).
+    """
     config = plan.config
     if (
-        plan.requests
-        or not plan.reused
+        not (plan.requests or plan.reused)
+        or segments_bags(plan.contract)
         or config.append
         or not config.overwrite
         or config.formats != ("lerobot",)
     ):
         return plan
-    if recorded_write_key(config.output) != write_key(plan, plan.reused):
+    recorded = recorded_write_key(config.output)  # before any bag's stamp: none on a first run
+    if recorded is None:
         return plan
-    return replace(plan, up_to_date=True)
+    unstaged = tuple(
+        replace(PlannedEpisode.of(r), reused=True, source_stamp=stamp_of(r.bag_uri)) for r in plan.requests
+    )
+    episodes = (*plan.reused, *unstaged)
+    if recorded != write_key(plan, episodes):
+        return plan
+    return replace(plan, requests=(), reused=episodes, up_to_date=True)
 
 
 def up_to_date(report: DatasetReport) -> bool:

@@ -208,6 +208,15 @@ def test_a_plan_is_up_to_date_only_when_the_dataset_is_what_it_would_write(tmp_p
     report = finish_up_to_date(plan_run(again.model_copy(update={"keep_staging": False})))
     assert (report.converted, len(report.reused), report.episodes) == (0, 2, 2)
     assert not (tmp_path / "staging").exists()
+    # with its staging gone, an unchanged fleet is still up to date (each bag judged by its stamp now)...
+    plan = plan_run(again)
+    assert (plan.up_to_date, plan.requests, len(plan.reused)) == (True, (), 2)
+    assert (finish_up_to_date(plan).converted, len(plan_run(again).reused)) == (0, 2)
+    # ...and a bag whose file changed is not: every bag converts again (none is staged to reuse)
+    recording = next((bags / "bag1").glob("*.mcap"))
+    recording.write_bytes(recording.read_bytes())  # the same bytes, a new modification time
+    plan = plan_run(again)
+    assert (plan.up_to_date, len(plan.requests), plan.reused) == (False, 2, ())
     assert validate_dataset(out, repo_id="test/up-to-date", decode_every=10).episodes == 2
 
 

@@ -6,7 +6,7 @@ from typing import Any
 
 from prefect.futures import PrefectFuture
 
-__all__ = ["cancel_ray", "cancel_unfinished"]
+__all__ = ["cancel_unfinished"]
 
 
 def cancel_unfinished(futures: list[PrefectFuture[Any]]) -> int:
@@ -21,14 +21,14 @@ def cancel_unfinished(futures: list[PrefectFuture[Any]]) -> int:
         if wrapped is None:
             continue
         if not hasattr(wrapped, "done"):
-            unfinished += cancel_ray(wrapped)
+            unfinished += _cancel_ray(wrapped)
         elif not wrapped.done():
             wrapped.cancel()
             unfinished += 1
     return unfinished
 
 
-def cancel_ray(ref: Any) -> bool:
+def _cancel_ray(ref: Any) -> bool:
     """Cancel a Ray task unless it finished; whether it had not.
 
     Unlike a process or thread, Ray interrupts a running task too; it stages nothing then, as

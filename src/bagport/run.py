@@ -208,9 +208,7 @@ def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
     recorded = recorded_write_key(config.output)  # before any bag's stamp: none on a first run
     if recorded is None:
         return plan
-    unstaged = tuple(
-        replace(PlannedEpisode.of(r), reused=True, source_stamp=stamp_of(r.bag_uri)) for r in plan.requests
-    )
+    unstaged = tuple(PlannedEpisode.reused_of(r, stamp_of(r.bag_uri)) for r in plan.requests)
     episodes = (*plan.reused, *unstaged)
     if recorded != write_key(plan, episodes):
         return plan

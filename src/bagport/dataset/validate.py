@@ -55,7 +55,7 @@ def validate_dataset(
         raise ValidationError(f"{path}: LeRobot sees {total} frames, info.json says {info['total_frames']}")
     video_keys = tuple(dataset.meta.video_keys)
     indices = _indices(dataset, decode_every)
-    _decode_frames(path, dataset, indices, info, progress)
+    _decode_frames(path, dataset, indices, video_keys, info, progress)
     return ValidationReport(
         str(path),
         dataset.meta.total_episodes,
@@ -89,6 +89,7 @@ def _decode_frames(
     path: Path,
     dataset: Any,
     indices: Sequence[int],
+    video_keys: Sequence[str],
     info: dict[str, Any],
     progress: Callable[[int, int], None] | None,
 ) -> None:
@@ -100,7 +101,7 @@ def _decode_frames(
             raise ValidationError(
                 f"{path}: LeRobot failed to read frame index={index}: {type(err).__name__}: {err}"
             ) from err
-        for key in dataset.meta.video_keys:
+        for key in video_keys:
             frame = item[key]
             if tuple(frame.shape[-2:]) != tuple(info["features"][key]["shape"][:2]):
                 raise ValidationError(

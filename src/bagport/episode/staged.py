@@ -62,6 +62,12 @@ class PlannedEpisode:
             request.note,
         )
 
+    @classmethod
+    def reused_of(cls, request: EpisodeRequest, source_stamp: str) -> PlannedEpisode:
+        """The request's episode taken as it is (no conversion task), converted from a bag with
+        ``source_stamp``."""
+        return replace(cls.of(request), reused=True, source_stamp=source_stamp)
+
     def key_fields(self) -> list[Any]:
         """Everything about this episode that decides what the dataset holds for it: the staged
         episode (its id fixes bag, contract, encoder, window; its stamp the bag's files) and what the
@@ -166,9 +172,7 @@ def split_staged(
     return StagedSplit(
         tuple(r for r in requests if r.episode_id not in reusable),
         tuple(
-            replace(PlannedEpisode.of(r), reused=True, source_stamp=reusable[r.episode_id])
-            for r in requests
-            if r.episode_id in reusable
+            PlannedEpisode.reused_of(r, reusable[r.episode_id]) for r in requests if r.episode_id in reusable
         ),
     )
 

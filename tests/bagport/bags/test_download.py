@@ -10,8 +10,10 @@ import fsspec
 import pytest
 from fsspec.implementations.memory import MemoryFileSystem
 
+from bagport.bags import download
 from bagport.bags.download import download_bag
 from bagport.errors import BagReadError, TransientError
+from bagport.scratch import scratch_dir
 
 
 def test_a_local_bag_is_its_own_path_and_nothing_is_copied(tmp_path: Path) -> None:
@@ -38,13 +40,12 @@ def test_a_remote_folder_is_copied_whole_with_its_subfolders() -> None:
 
 def test_a_missing_remote_bag_names_the_uri_and_leaves_no_scratch(monkeypatch: pytest.MonkeyPatch) -> None:
     made: list[Path] = []
-    real_scratch = download_bag.__globals__["scratch_dir"]
 
     def recorded(kind: str) -> Path:
-        made.append(real_scratch(kind))
+        made.append(scratch_dir(kind))
         return made[-1]
 
-    monkeypatch.setitem(download_bag.__globals__, "scratch_dir", recorded)
+    monkeypatch.setattr(download, "scratch_dir", recorded)
     with pytest.raises(BagReadError) as caught:
         download_bag("memory://fleet/gone.db3", {})
     assert caught.value.uri == "memory://fleet/gone.db3"

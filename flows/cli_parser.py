@@ -17,6 +17,9 @@ from flows.cli_push import add_push_command, add_push_options
 __all__ = ["Handler", "build_parser"]
 
 Handler = Callable[[argparse.Namespace], int]
+type Subparsers = argparse._SubParsersAction[argparse.ArgumentParser]
+"""What ``add_subparsers()`` returns (argparse's class is generic to type checkers only; a ``type`` alias is
+not evaluated at run time)."""
 
 
 def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.ArgumentParser:
@@ -25,7 +28,20 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
     parser = argparse.ArgumentParser(prog="bagport", description="ROS bags -> LeRobot v3.0 datasets.")
     parser.add_argument("--version", action="version", version=f"bagport {version}")
     sub = parser.add_subparsers(dest="command", required=True)
+    _add_convert(sub, handlers["convert"])
+    reading_bags = [_add_qa(sub, handlers["qa"]), _add_inspect(sub, handlers["inspect"])]
+    _add_dataset_commands(sub, handlers)
+    add_push_command(sub)
+    reading_bags += _add_contract(sub, handlers)
+    _add_synth(sub, handlers["synth"])
+    for command in reading_bags:  # convert's is its ConvertConfig field's
+        command.add_argument(
+            "--msg-path", default=None, help=ConvertConfig.model_fields["msg_path"].description
+        )
+    return parser
 
+
+def _add_convert(sub: Subparsers, handler: Handler) -> None:
     convert = sub.add_parser(
         "convert",
         help="convert the bags of a manifest with a contract (Prefect flow)",
@@ -58,8 +74,10 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
         "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
     )
     loudness.add_argument("--verbose", action="store_true", help="show Prefect's flow and task logs")
-    convert.set_defaults(func=handlers["convert"])
+    convert.set_defaults(func=handler)
 
+
+def _add_qa(sub: Subparsers, handler: Handler) -> argparse.ArgumentParser:
     qa = sub.add_parser(
         "qa",
         help="score bags against a contract without converting them (no video)",
@@ -78,8 +96,11 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
         action="store_true",
         help="score episodes labelled failed or discarded like the others (default: listed as excluded)",
     )
-    qa.set_defaults(func=handlers["qa"])
+    qa.set_defaults(func=handler)
+    return qa
 
+
+def _add_inspect(sub: Subparsers, handler: Handler) -> argparse.ArgumentParser:
     inspect = sub.add_parser(
         "inspect",
         help="print what `ros2 bag info` prints, without ROS",
@@ -90,8 +111,12 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
         "then every topic whose type no source defines.",
     )
     inspect.add_argument("uri", nargs="+", help="bag folder, .mcap, .db3 or .bag (local or fsspec URI)")
-    inspect.set_defaults(func=handlers["inspect"])
+    inspect.set_defaults(func=handler)
+    return inspect
 
+
+def _add_dataset_commands(sub: Subparsers, handlers: Mapping[str, Handler]) -> None:
+    """``validate`` and ``repair``: the commands on a written dataset."""
     validate = sub.add_parser(
         "validate",
         help="check checksums, load a dataset with LeRobot and decode every frame",
@@ -118,8 +143,9 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
     repair.add_argument("output", help="dataset folder or URI (as given to convert --output)")
     repair.set_defaults(func=handlers["repair"])
 
-    add_push_command(sub)
 
+def _add_contract(sub: Subparsers, handlers: Mapping[str, Handler]) -> list[argparse.ArgumentParser]:
+    """``contract check`` and ``contract init``, returned (both read bags)."""
     contract = sub.add_parser("contract", help="work with contracts")
     contract_sub = contract.add_subparsers(dest="contract_command", required=True)
     check = contract_sub.add_parser(
@@ -146,7 +172,10 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
     init.add_argument("--robot-type", default="my_robot")
     init.add_argument("--fps", type=int, default=30)
     init.set_defaults(func=handlers["contract init"])
+    return [check, init]
 
+
+def _add_synth(sub: Subparsers, handler: Handler) -> None:
     synth = sub.add_parser(
         "synth",
         help="write a synthetic fleet of bags with known ground truth",
@@ -157,9 +186,4 @@ def build_parser(handlers: Mapping[str, Handler], version: str) -> argparse.Argu
     synth.add_argument("--episodes", type=int, default=4)
     synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
     synth.add_argument("--seed", type=int, default=0)
-    synth.set_defaults(func=handlers["synth"])
-    for command in (qa, inspect, check, init):  # convert's is its ConvertConfig field's
-        command.add_argument(
-            "--msg-path", default=None, help=ConvertConfig.model_fields["msg_path"].description
-        )
-    return parser
+    synth.set_defaults(func=handler)

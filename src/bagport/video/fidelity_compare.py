@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from fractions import Fraction
 from itertools import chain
@@ -199,42 +200,27 @@ def compare_frames(
     try:
         stream = container.streams.video[0]
         rank = _presentation_ranks(container, stream, fps, scores)
-        container.seek(0)
-        unfed: list[Any] = []
-        live = False  # the decoder has this GOP's key frame
-        packets = (p for p in container.demux(stream) if p.pts is not None and p.size)
-        for packet in chain(packets, [None]):  # lazily: a list of every packet grows with the clip
-            if packet is not None:
-                if packet.is_keyframe:
-                    unfed, live = [], False
-                unfed.append(packet)
-                if not live and sampled_slot(rank.get(packet.pts, -1), sample_every, run) is None:
-                    continue
-                batch, unfed, live = unfed, [], True
-            else:
-                batch = [None]  # flush the decoder
-            for item in batch:
-                for frame in stream.codec_context.decode(item):
-                    n = rank.get(frame.pts, -1)
-                    slot = sampled_slot(n, sample_every, run) if n >= 0 else None
-                    if slot is None or slot >= size or scored[slot]:
-                        continue
-                    rgb = frame.to_ndarray(format="rgb24")
-                    decoded = grid.means(rgb)
-                    reference = refs[slot].astype(np.float32)
-                    psnr, mask, copy_of = _score(decoded, reference, recent, params)
-                    recent.append((n, reference))
-                    blocks = int(mask.sum())
-                    is_damaged = blocks >= params.min_damaged_blocks or copy_of is not None
-                    scores.frame_index[slot] = n
-                    scores.psnr_db[slot] = psnr
-                    scores.damaged_blocks[slot] = blocks
-                    scores.copy_of[slot] = -1 if copy_of is None else copy_of
-                    scores.damaged[slot] = is_damaged
-                    scored[slot] = True
-                    key = (is_damaged, blocks, -psnr)
-                    if key > worst.key:
-                        worst = _Worst(key, n, psnr, blocks, copy_of, rgb, decoded, reference, mask)
+        for frame in _sampled_gops(container, stream, rank, sample_every, run):
+            n = rank.get(frame.pts, -1)
+            slot = sampled_slot(n, sample_every, run) if n >= 0 else None
+            if slot is None or slot >= size or scored[slot]:
+                continue
+            rgb = frame.to_ndarray(format="rgb24")
+            decoded = grid.means(rgb)
+            reference = refs[slot].astype(np.float32)
+            psnr, mask, copy_of = _score(decoded, reference, recent, params)
+            recent.append((n, reference))
+            blocks = int(mask.sum())
+            is_damaged = blocks >= params.min_damaged_blocks or copy_of is not None
+            scores.frame_index[slot] = n
+            scores.psnr_db[slot] = psnr
+            scores.damaged_blocks[slot] = blocks
+            scores.copy_of[slot] = -1 if copy_of is None else copy_of
+            scores.damaged[slot] = is_damaged
+            scored[slot] = True
+            key = (is_damaged, blocks, -psnr)
+            if key > worst.key:
+                worst = _Worst(key, n, psnr, blocks, copy_of, rgb, decoded, reference, mask)
     except av.error.FFmpegError as err:
         scores.decode_error = f"decoding stopped: {err}"
     finally:
@@ -243,6 +229,30 @@ def compare_frames(
     scores.keep(scored)
     scores.worst = _frame_pair(worst, grid)
     return scores
+
+
+def _sampled_gops(
+    container: Any, stream: Any, rank: dict[int, int], sample_every: int, run: int
+) -> Iterator[Any]:
+    """The decoded frames of every GOP that holds a sampled frame (from the clip's start), in decoding
+    order: the packets from each key frame on are held until one of them is sampled, and a GOP with none
+    is never decoded."""
+    container.seek(0)
+    unfed: list[Any] = []
+    live = False  # the decoder has this GOP's key frame
+    packets = (p for p in container.demux(stream) if p.pts is not None and p.size)
+    for packet in chain(packets, [None]):  # lazily: a list of every packet grows with the clip
+        if packet is not None:
+            if packet.is_keyframe:
+                unfed, live = [], False
+            unfed.append(packet)
+            if not live and sampled_slot(rank.get(packet.pts, -1), sample_every, run) is None:
+                continue
+            batch, unfed, live = unfed, [], True
+        else:
+            batch = [None]  # flush the decoder
+        for item in batch:
+            yield from stream.codec_context.decode(item)
 
 
 def _presentation_ranks(container: Any, stream: Any, fps: int | None, scores: FrameScores) -> dict[int, int]:

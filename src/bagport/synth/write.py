@@ -251,11 +251,8 @@ def _events(truth: GroundTruth, video: dict[str, list[VideoPacket]]) -> Iterator
     return iter(events)
 
 
-def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> GroundTruth:
-    """Write one episode; mcap/sqlite3 make a rosbag2 folder at ``path``, ros1 a ``.bag`` file."""
-    truth = GroundTruth(spec)
-    msgs = _Messages(ros1=storage == "ros1")
-    cameras = {cam.topic: cam for cam in spec.cameras}
+def _topic_types(spec: EpisodeSpec) -> dict[str, str]:
+    """Each topic the episode records, and its message type."""
     types = {spec.JOINT_TOPIC: "sensor_msgs/msg/JointState", spec.ACTION_TOPIC: "sensor_msgs/msg/JointState"}
     types.update({cam.topic: cam.msgtype for cam in spec.cameras})
     if spec.task is not None:
@@ -266,6 +263,15 @@ def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> G
         types[spec.EVENTS_TOPIC] = "std_msgs/msg/String"
     if spec.done_at_s:
         types[spec.DONE_TOPIC] = "std_msgs/msg/Bool"
+    return types
+
+
+def write_episode_bag(path: Path, storage: SynthStorage, spec: EpisodeSpec) -> GroundTruth:
+    """Write one episode; mcap/sqlite3 make a rosbag2 folder at ``path``, ros1 a ``.bag`` file."""
+    truth = GroundTruth(spec)
+    msgs = _Messages(ros1=storage == "ros1")
+    cameras = {cam.topic: cam for cam in spec.cameras}
+    types = _topic_types(spec)
     joint_header_ns = spec.faults.joint_header_ns(truth.joint_stamps_ns())
     rng = np.random.default_rng(spec.seed + 1)
     video = _video_packets(spec, truth)

@@ -72,20 +72,7 @@ def select_episodes(
     ``keep_labelled`` keeps episodes labelled failed or discarded; ``appending`` (to an existing
     dataset) allows keeping nothing, so the exclusions are still recorded.
     """
-    rows: list[tuple[int, QAEntry, EpisodeSummary | None, _Episode]] = [
-        (s.manifest_entry, _read_qa(s), s, _Episode(s.segment, s.label, s.note, s.metadata))
-        for s in summaries
-    ]
-    rows += [
-        (
-            f.manifest_entry,
-            QAEntry(EpisodeQA.failed(f.bag_uri, f.error), f.manifest_entry, None),
-            None,
-            _Episode(f.segment, f.label, f.note, f.metadata),
-        )
-        for f in failures
-    ]
-    rows.sort(key=lambda row: (row[0], row[1].qa.bag_uri, -1 if row[3].segment is None else row[3].segment))
+    rows = _rows(summaries, failures)
     by_label = [not keep_labelled and row[3].label in EXCLUDED_LABELS for row in rows]
     failing = [
         (entry, base.qa)
@@ -123,6 +110,29 @@ def select_episodes(
         # (an append still records the exclusions, so an unchanged bad bag is not retried by every run)
         raise _nothing_kept_error(entries)
     return kept, entries
+
+
+_Row = tuple[int, QAEntry, EpisodeSummary | None, _Episode]
+"""A bag's (or segment's) manifest entry, QA entry, staged summary (``None``: not converted), labels."""
+
+
+def _rows(summaries: Sequence[EpisodeSummary], failures: Sequence[EpisodeFailure]) -> list[_Row]:
+    """Every staged episode and failed bag, in manifest order (then bag, then segment)."""
+    rows: list[_Row] = [
+        (s.manifest_entry, _read_qa(s), s, _Episode(s.segment, s.label, s.note, s.metadata))
+        for s in summaries
+    ]
+    rows += [
+        (
+            f.manifest_entry,
+            QAEntry(EpisodeQA.failed(f.bag_uri, f.error), f.manifest_entry, None),
+            None,
+            _Episode(f.segment, f.label, f.note, f.metadata),
+        )
+        for f in failures
+    ]
+    rows.sort(key=lambda row: (row[0], row[1].qa.bag_uri, -1 if row[3].segment is None else row[3].segment))
+    return rows
 
 
 def _fail_run_error(

@@ -106,7 +106,8 @@ class ConvertConfig(BaseModel):
     overwrite: bool = Field(
         default=False,
         description="replace an existing dataset at --output (the old dataset stays in place until the new "
-        "one is complete)",
+        "one is complete); a folder that is not a dataset (no meta/info.json) and is not empty, or one that "
+        "holds a bag of the manifest, is refused",
     )
     append: bool = Field(
         default=False,

@@ -22,6 +22,7 @@ from bagport.dataset.base import read_base
 from bagport.dataset.history import converted_bags, recorded_write_key
 from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
+from bagport.dataset.replace import refuse_existing
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
 from bagport.errors import DatasetWriteError
@@ -93,11 +94,8 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     if config.append and fs.exists(out_path):
         done = converted_bags(config.output)
         _refuse_incompatible_append(config, contract)
-    elif fs.exists(out_path) and not config.overwrite:
-        raise DatasetWriteError(
-            f"{config.output} already exists; nothing was written. Fix: choose a new --output, or pass "
-            "--overwrite to replace it (the old dataset stays until the new one is complete)."
-        )
+    elif not config.append:
+        refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
     check_format_outputs(config)
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(

@@ -238,3 +238,15 @@ def test_an_object_store_dataset_is_up_to_date_by_one_listing(tmp_path: Path, s3
     fs.pipe("uptodate/ds/data/chunk-000/extra.parquet", b"")
     fs.invalidate_cache()
     assert not plan_run(again).up_to_date
+
+
+def test_overwrite_never_removes_a_folder_that_is_not_a_dataset(fleet: Path, tmp_path: Path) -> None:
+    """A typo in --output, or the bags' own folder as --output: refused before anything runs, kept whole."""
+    config = ConvertConfig(
+        manifest=str(fleet / "manifest.yaml"), contract=str(SAMPLE_CONTRACT), output=str(fleet),
+        staging=str(tmp_path / "staging"), encoder=FAST_CODEC, overwrite=True,
+    )  # fmt: skip
+    before = sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*"))
+    with pytest.raises(DatasetWriteError, match="is not a dataset"):
+        plan_run(config)
+    assert sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*")) == before

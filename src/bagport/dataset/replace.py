@@ -6,9 +6,10 @@ place with the publish guarantees: locally built beside the target and exchanged
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
+from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
 from bagport.dataset.publish import building_beside, swap_into_place
@@ -20,14 +21,40 @@ from bagport.uris import is_local
 __all__ = ["publish_built", "refuse_existing"]
 
 
-def refuse_existing(output: str, *, overwrite: bool) -> None:
-    """An existing ``output`` is an error unless ``overwrite`` (call after repairing it)."""
+def refuse_existing(output: str, *, overwrite: bool, inputs: Sequence[str] = ()) -> None:
+    """An existing ``output`` is an error unless ``overwrite`` (call after repairing it), and even then
+    unless it is a dataset (its ``meta/info.json``, which every output bagport writes has) or an empty
+    folder, and holds none of the run's ``inputs`` (bag URIs): replacing an output removes what it held.
+    """
     fs, out_path = url_to_fs(output)
-    if fs.exists(out_path) and not overwrite:
+    if not fs.exists(out_path):
+        return
+    if not overwrite:
         raise DatasetWriteError(
             f"{output} already exists; nothing was written. Fix: choose a new --output, or pass --overwrite "
             "to replace it (the old one is kept until the new one is complete)."
         )
+    if not _a_dataset_or_empty(fs, out_path):
+        raise DatasetWriteError(
+            f"{output} exists and is not a dataset (no meta/info.json): --overwrite replaces only a dataset "
+            f"(or an empty folder), as it removes everything the output holds; nothing was written. Fix: "
+            f"choose a new --output, or move {output} away yourself if it is meant to go."
+        )
+    root = out_path.rstrip("/") + "/"
+    for uri in inputs:
+        bag_fs, bag_path = url_to_fs(uri)
+        if bag_fs.protocol == fs.protocol and bag_path.startswith(root):
+            raise DatasetWriteError(
+                f"{output} holds the bag {uri}, and --overwrite would remove it with the old dataset; "
+                "nothing was written. Fix: keep the bags outside the dataset's folder, or write to a new "
+                "--output."
+            )
+
+
+def _a_dataset_or_empty(fs: AbstractFileSystem, path: str) -> bool:
+    if fs.isfile(path):
+        return False
+    return bool(fs.exists(f"{path.rstrip('/')}/meta/info.json")) or not fs.ls(path, detail=False)
 
 
 def publish_built[Report](output: str, build: Callable[[Path], Report]) -> Report:

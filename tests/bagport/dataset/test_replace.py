@@ -1,0 +1,53 @@
+"""What an existing output may be replaced with --overwrite: a dataset or an empty folder, never what else
+a folder holds (a typo in --output, the bags' own folder)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from bagport.dataset.replace import refuse_existing
+from bagport.errors import DatasetWriteError
+
+
+def test_a_missing_output_is_free_and_an_existing_one_needs_overwrite(tmp_path: Path) -> None:
+    refuse_existing(str(tmp_path / "new"), overwrite=False)
+    with pytest.raises(DatasetWriteError, match="already exists; nothing was written"):
+        refuse_existing(str(tmp_path), overwrite=False)
+
+
+def test_overwrite_replaces_a_dataset_or_an_empty_folder(tmp_path: Path) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    refuse_existing(str(empty), overwrite=True)
+    dataset = tmp_path / "ds"
+    (dataset / "meta").mkdir(parents=True)
+    (dataset / "meta/info.json").write_text("{}")
+    (dataset / "data").mkdir()
+    refuse_existing(str(dataset), overwrite=True, inputs=[str(tmp_path / "bags/a.mcap")])
+
+
+def test_overwrite_refuses_a_folder_that_is_not_a_dataset_and_keeps_it(tmp_path: Path) -> None:
+    folder = tmp_path / "important"
+    folder.mkdir()
+    (folder / "notes.txt").write_text("precious")
+    with pytest.raises(DatasetWriteError, match=r"is not a dataset \(no meta/info\.json\)") as err:
+        refuse_existing(str(folder), overwrite=True)
+    assert "Fix: choose a new --output" in str(err.value)
+    assert (folder / "notes.txt").read_text() == "precious"
+    a_file = tmp_path / "file.parquet"
+    a_file.write_bytes(b"x")
+    with pytest.raises(DatasetWriteError, match="is not a dataset"):
+        refuse_existing(str(a_file), overwrite=True)
+
+
+def test_overwrite_refuses_a_dataset_that_holds_a_bag_of_the_run(tmp_path: Path) -> None:
+    dataset = tmp_path / "ds"
+    (dataset / "meta").mkdir(parents=True)
+    (dataset / "meta/info.json").write_text("{}")
+    bag = dataset / "bags/ep0"
+    with pytest.raises(DatasetWriteError, match=r"holds the bag .*ep0, and --overwrite would remove it"):
+        refuse_existing(str(dataset), overwrite=True, inputs=[str(tmp_path / "elsewhere"), str(bag)])
+    # a sibling whose name starts like the dataset's is not inside it
+    refuse_existing(str(dataset), overwrite=True, inputs=[str(tmp_path / "ds-bags/ep0")])

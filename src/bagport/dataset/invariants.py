@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
@@ -111,7 +110,7 @@ def _check_data(root: Path, info: dict[str, Any], episodes: list[Row]) -> None:
         path = root / info["data_path"].format(chunk_index=chunk, file_index=file)
         if not path.is_file():
             raise _fail(path, f"missing (referenced by episodes {[r['episode_index'] for r in group]})")
-        table = pq.read_table(path)
+        table = _read_parquet(path)
         extra = set(table.column_names) - set(columns)
         absent = set(columns) - set(table.column_names)
         if extra or absent:
@@ -191,13 +190,25 @@ def _check_stats(root: Path, info: dict[str, Any]) -> None:
                 )
 
 
+def _read_parquet(path: Path) -> pa.Table:
+    """``path``'s table; a file that is not readable parquet (damaged, truncated) is a :class:`ValidationError`."""
+    try:
+        return pq.read_table(path)
+    except (pa.ArrowException, OSError) as err:
+        raise _fail(
+            path,
+            f"is not a readable parquet file ({err}). Fix: the file was damaged after it was written; convert "
+            "the bags again into a new --output (or --overwrite this one)",
+        ) from err
+
+
 def check_invariants(root: Path) -> dict[str, Any]:
     """Raise on the first violated invariant; returns info.json on success."""
     info = _load_info(root)
     tasks_path = root / TASKS_PATH
     if not tasks_path.is_file():
         raise _fail(tasks_path, "missing")
-    tasks = pd.read_parquet(tasks_path)
+    tasks = _read_parquet(tasks_path).to_pandas()
     if list(tasks["task_index"]) != list(range(len(tasks))) or len(tasks) != info["total_tasks"]:
         raise _fail(tasks_path, f"task_index must be 0..{info['total_tasks'] - 1}")
     episode_files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
@@ -205,7 +216,7 @@ def check_invariants(root: Path) -> dict[str, Any]:
         raise _fail(root / "meta/episodes", "no episodes parquet")
     episodes: list[Row] = []
     for episode_file in episode_files:
-        episodes.extend(pq.read_table(episode_file).to_pylist())
+        episodes.extend(_read_parquet(episode_file).to_pylist())
     _check_episode_rows(root, info, episodes)
     _check_data(root, info, episodes)
     _check_videos(root, info, episodes)

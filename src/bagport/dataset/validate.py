@@ -47,8 +47,8 @@ def validate_dataset(
             f"{path} needs repair: {interrupted}. Fix: run `bagport repair {path}` (or the same conversion "
             "again), which finishes or undoes that write."
         )
+    checked = verify_checksums(path)  # first: a changed file is named as changed, whatever it breaks
     info = check_invariants(path)
-    checked = verify_checksums(path)
     dataset = _load_with_lerobot(path, repo_id)
     total = len(dataset)
     if total != info["total_frames"]:

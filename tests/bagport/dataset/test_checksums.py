@@ -57,3 +57,19 @@ def test_a_data_file_bagport_did_not_write_fails_validate(
     stray.write_bytes((out / "data/chunk-000/file-000.parquet").read_bytes())
     with pytest.raises(ValidationError, match=r"file-001\.parquet: not written by bagport"):
         verify_checksums(out)
+
+
+def test_a_damaged_data_file_is_named_not_a_traceback(staged: list[EpisodeSummary], tmp_path: Path) -> None:
+    """A byte appended to a parquet file breaks its footer: validate names it as changed (the checksums are
+    checked before anything reads it), and, with no run record to check against, as unreadable."""
+    out = tmp_path / "ds"
+    write_dataset(staged, str(out), robot_type="r")
+    data = out / "data/chunk-000/file-000.parquet"
+    data.write_bytes(data.read_bytes() + b"x")
+    with pytest.raises(ValidationError, match=r"data/chunk-000/file-000\.parquet: changed since"):
+        validate_dataset(out, decode_every=1000)
+    for record in (out / "meta/provenance").glob("run*.json"):
+        record.unlink()
+    with pytest.raises(ValidationError, match=r"file-000\.parquet: is not a readable parquet file") as err:
+        validate_dataset(out, decode_every=1000)
+    assert "Fix: " in str(err.value)

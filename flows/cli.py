@@ -155,10 +155,15 @@ def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
     from bagport.run import up_to_date  # noqa: PLC0415
 
     if up_to_date(report):
+        failed = (
+            f", {len(report.excluded)} bag(s) that failed to convert before and are unchanged not tried again"
+            if report.excluded
+            else ""
+        )
         return (
-            f"up to date: {len(report.reused)} episode(s) reused, nothing to write at {report.root} (its run "
-            f"record has this run's write key; {report.episodes} episode(s), {report.duration_s:.1f} s of "
-            f"recordings); checked in {wall_s:.1f} s"
+            f"up to date: {len(report.reused)} episode(s) reused{failed}, nothing to write at {report.root} "
+            f"(its run record has this run's write key; {report.episodes} episode(s), {report.duration_s:.1f} s "
+            f"of recordings); checked in {wall_s:.1f} s"
         )
     if append and not report.converted and not report.reused:
         return (

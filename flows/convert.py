@@ -31,6 +31,7 @@ from bagport.segment import SegmentedBag, segments_bags
 from flows import forkserver
 from flows.artifacts import Progress, publish_run_artifacts
 from flows.cancel import cancel_unfinished
+from flows.finished import Finished, not_the_bags_fault
 from flows.reduce import reduce_dataset
 from flows.run_story import completed_state
 from flows.runners import (
@@ -88,11 +89,11 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
         return stopped
     unsegmented = len(failures)
     staged = list(episodes.reused)
-    for request, error in episodes.in_plan_order():
-        if error is None:
-            staged.append(PlannedEpisode.of(request))
+    for done in episodes.in_plan_order():
+        if done.error is None:
+            staged.append(PlannedEpisode.of(done.request))
         else:  # bagport's one-paragraph error (a bad bag's task ends Failed with it as its message)
-            failures.append(EpisodeFailure.of(request, error))
+            failures.append(EpisodeFailure.of(done.request, done.error, retryable=done.retryable))
     if failures:
         logger.warning(
             "%d of %d episode(s) failed; the QA policy (on_fail: %s) decides what happens to the run:\n%s",
@@ -244,26 +245,26 @@ class _Episodes:
         self.futures.append(future)
         self._batches.append(batch)
 
-    def outcomes(self, future: PrefectFuture[Any]) -> list[tuple[EpisodeRequest, str | None, str | None]]:
-        """(request, error or ``None``, QA verdict) of each episode of a finished task run."""
+    def outcomes(self, future: PrefectFuture[Any]) -> list[Finished]:
+        """How each episode of a finished task run ended."""
         batch = [request for _, request in self._batches[self._index[id(future)]]]
         state = future.state
         if not state.is_completed():
-            return [(request, state.message or str(state.name), None) for request in batch]
+            error, retryable = state.message or str(state.name), not_the_bags_fault(state)
+            return [Finished(r, error, None, retryable) for r in batch]
         result = future.result()
         items: list[EpisodeOutcome] = result if isinstance(result, list) else [result]
-        return [(r, item.error, item.qa_verdict) for r, item in zip(batch, items, strict=True)]
+        return [Finished(r, i.error, i.qa_verdict, i.transient) for r, i in zip(batch, items, strict=True)]
 
-    def in_plan_order(self) -> list[tuple[EpisodeRequest, str | None]]:
-        """Episodes in manifest order, then in their order inside the bag (not in finishing order),
-        each with its error (``None``: staged)."""
+    def in_plan_order(self) -> list[Finished]:
+        """Episodes in manifest order, then in their order inside the bag (not in finishing order)."""
         rows = [
-            (place, request, error)
+            (place, done)
             for future, batch in zip(self.futures, self._batches, strict=True)
-            for (place, _), (request, error, _) in zip(batch, self.outcomes(future), strict=True)
+            for (place, _), done in zip(batch, self.outcomes(future), strict=True)
         ]
         rows.sort(key=lambda row: row[0])
-        return [(request, error) for _, request, error in rows]
+        return [done for _, done in rows]
 
     def cancel_unfinished(self) -> int:
         """Cancel the task runs not finished yet; how many episodes they held."""
@@ -317,12 +318,10 @@ def _segments_of(
     return list(found.requests), None
 
 
-def _fail_fast_reason(
-    plan: RunPlan, outcomes: list[tuple[EpisodeRequest, str | None, str | None]]
-) -> str | None:
+def _fail_fast_reason(plan: RunPlan, outcomes: list[Finished]) -> str | None:
     """Why ``--fail-fast`` stops the run after these episodes: a conversion failed, or one failed QA
     under ``fail_run`` (the run fails anyway); ``None`` to go on."""
-    for request, error, verdict in outcomes:
+    for request, error, verdict, _ in outcomes:
         where = f"bags[{request.manifest_entry}] {request.bag_uri} {QualityError.MARKER}"
         if error is not None:
             return f"{where} ({error})"

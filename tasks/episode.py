@@ -92,7 +92,7 @@ def _convert_retrying(request: EpisodeRequest, label: str) -> EpisodeOutcome:
         except TransientError as err:
             if delay_s is None:
                 logger.error("%s: %s", label, err)
-                return EpisodeOutcome(request.episode_id, error=str(err))
+                return EpisodeOutcome(request.episode_id, error=str(err), transient=True)
             logger.warning("%s: %s; retrying in %d s", label, err, delay_s)
             time.sleep(delay_s)
         except BagportError as err:

@@ -20,8 +20,8 @@ from bagport.dataset.history import dataset_report, record_exclusions
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import DatasetWriteError
 from bagport.formats import write_formats
-from bagport.qa import QAEntry, episode_ref
-from bagport.run import RunPlan, up_to_date, write_key
+from bagport.qa import EpisodeQA, QAEntry, episode_ref
+from bagport.run import RunPlan, failure_key, up_to_date, write_key
 from bagport.segment import kept_segmentation
 from bagport.selection import EpisodeFailure, select_episodes
 from bagport.staging import EpisodeSummary, StagedFeature, read_summary
@@ -46,7 +46,16 @@ def finish_up_to_date(plan: RunPlan) -> DatasetReport:
         _remove_staged(plan, [e.dir_uri for e in plan.reused])
     reused = tuple(episode_ref(e.bag_uri, e.segment) for e in plan.reused)
     report = dataset_report(plan.config.output)
-    return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs())
+    failed = tuple(
+        QAEntry(
+            EpisodeQA.failed(f.bag_uri, f.error),
+            f.manifest_entry,
+            None,
+            excluded_reason=f"conversion failed before, the bag unchanged since: {f.error}",
+        ).brief()
+        for f in plan.settled_failures
+    )
+    return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs(), excluded=failed)
 
 
 def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str, Any]:
@@ -157,11 +166,19 @@ def start_reduce(
         video_files_size_in_mb=plan.config.video_files_size_in_mb,
     )
     record = run_record(plan, staged)
+    stamp_of = {f.bag_uri: source_stamp(f.bag_uri) for f in failures if not f.retryable}
     if not plan.config.append:  # an append's record describes its own episodes only
         record["write_key"] = write_key(plan, stamped, failures)
-    # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag
+        record["failures"] = [  # what an unchanged re-run needs to find it is up to date (bagport.run)
+            {**failure_key(f), "source_stamp": stamp_of[f.bag_uri]} for f in failures if not f.retryable
+        ]
+    # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag;
+    # a bag that failed for a transient reason has none, so the next run tries it again
+    retry = {(f.bag_uri, f.segment) for f in failures if f.retryable}
     record["excluded"] = [
-        replace(e.brief(), source_stamp=source_stamp(e.qa.bag_uri)).to_json()
+        e.brief().to_json()
+        if (e.qa.bag_uri, e.segment) in retry
+        else replace(e.brief(), source_stamp=source_stamp(e.qa.bag_uri)).to_json()
         for e in entries
         if e.episode_index is None
     ]

@@ -126,3 +126,5 @@ class EpisodeOutcome:
     qa_verdict: str | None = None
     error: str | None = None
     """bagport's error when the episode could not be converted."""
+    transient: bool = False
+    """The error is a transient I/O error still there after the retries (not the bag's fault)."""

@@ -10,6 +10,7 @@ import hashlib
 import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from typing import Any
 
 from fsspec.core import url_to_fs
 
@@ -19,7 +20,7 @@ from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetReport
 from bagport.dataset.base import read_base
-from bagport.dataset.history import converted_bags, recorded_write_key
+from bagport.dataset.history import converted_bags, recorded_failures, recorded_write_key
 from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
 from bagport.dataset.replace import refuse_existing
@@ -62,6 +63,9 @@ class RunPlan:
     up_to_date: bool = False
     """The dataset at the output is what this run would write (the same write key, every episode
     reused): nothing converts and nothing is written (:func:`finish_up_to_date`)."""
+    settled_failures: tuple[EpisodeFailure, ...] = ()
+    """In an up-to-date plan: the bags that failed to convert in the run that wrote the dataset, unchanged
+    since (the same source stamp), so they would fail the same way: not tried again."""
 
 
 def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
@@ -185,6 +189,16 @@ def write_key(
     return "sha256:" + hashlib.sha256(text.encode()).hexdigest()
 
 
+def failure_key(failure: EpisodeFailure) -> dict[str, Any]:
+    """A failed bag as the run record keeps it, with what :func:`write_key` holds of it."""
+    return {
+        "manifest_entry": failure.manifest_entry,
+        "bag_uri": failure.bag_uri,
+        "segment": failure.segment,
+        "error": failure.error,
+    }
+
+
 def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
     """The plan marked up to date when the dataset at the output (replaced with ``--overwrite``; LeRobot
     only) was written with the key this run would write: such a re-run costs the plan.
@@ -208,9 +222,26 @@ def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
         return plan
     unstaged = tuple(PlannedEpisode.reused_of(r, stamp_of(r.bag_uri)) for r in plan.requests)
     episodes = (*plan.reused, *unstaged)
-    if recorded != write_key(plan, episodes):
+    if recorded == write_key(plan, episodes):
+        return replace(plan, requests=(), reused=episodes, up_to_date=True)
+    # bags the recorded run could not convert for their own sake, unchanged since, fail the same way
+    settled = {
+        (f.get("manifest_entry"), f.get("bag_uri")): f
+        for f in recorded_failures(config.output)
+        if "error" in f
+    }
+    if not settled:
         return plan
-    return replace(plan, requests=(), reused=episodes, up_to_date=True)
+    failed: list[EpisodeFailure] = []
+    for request, episode in zip(plan.requests, unstaged, strict=True):
+        found = settled.get((request.manifest_entry, request.bag_uri))
+        if found is not None and found.get("source_stamp") == episode.source_stamp:
+            failed.append(EpisodeFailure.of(request, str(found["error"])))
+    gone = {(f.manifest_entry, f.bag_uri) for f in failed}
+    episodes = (*plan.reused, *(e for e in unstaged if (e.manifest_entry, e.bag_uri) not in gone))
+    if recorded != write_key(plan, episodes, failed):
+        return plan
+    return replace(plan, requests=(), reused=episodes, up_to_date=True, settled_failures=tuple(failed))
 
 
 def up_to_date(report: DatasetReport) -> bool:

@@ -27,9 +27,12 @@ class EpisodeFailure:
     label: str | None = None
     note: str = ""
     metadata: dict[str, JsonValue] = field(default_factory=dict)
+    retryable: bool = False
+    """Not the bag's fault (a transient I/O error after the retries, a crashed task run): a later run
+    tries the bag again, where an unchanged bag that failed for itself is not retried."""
 
     @classmethod
-    def of(cls, request: EpisodeRequest, error: str) -> EpisodeFailure:
+    def of(cls, request: EpisodeRequest, error: str, *, retryable: bool = False) -> EpisodeFailure:
         return cls(
             request.bag_uri,
             request.manifest_entry,
@@ -38,6 +41,7 @@ class EpisodeFailure:
             request.label,
             request.note,
             dict(request.metadata),
+            retryable,
         )
 
 

@@ -12,9 +12,10 @@ from s3fs import S3FileSystem
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
-from bagport.errors import DatasetWriteError, QualityError
+from bagport.episode import convert_episode
+from bagport.errors import BagportError, DatasetWriteError, QualityError
 from bagport.reduce import finish_up_to_date, reduce_run
-from bagport.run import EpisodeFailure, PlannedEpisode, plan_run, stage_all
+from bagport.run import EpisodeFailure, PlannedEpisode, RunPlan, plan_run, stage_all
 from bagport.synth import EpisodeSpec, Faults, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT, SMALL_CAMERAS
 
@@ -250,3 +251,52 @@ def test_overwrite_never_removes_a_folder_that_is_not_a_dataset(fleet: Path, tmp
     with pytest.raises(DatasetWriteError, match="is not a dataset"):
         plan_run(config)
     assert sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*")) == before
+
+
+def _convert_all(
+    plan: RunPlan, *, retryable: bool = False
+) -> tuple[list[PlannedEpisode], list[EpisodeFailure]]:
+    """What the flow does with each bag: staged, or its failure (``retryable``: as a transient error's)."""
+    staged: list[PlannedEpisode] = list(plan.reused)
+    failures: list[EpisodeFailure] = []
+    for request in plan.requests:
+        try:
+            convert_episode(request)
+        except BagportError as err:
+            failures.append(EpisodeFailure.of(request, str(err), retryable=retryable))
+        else:
+            staged.append(PlannedEpisode.of(request))
+    return staged, failures
+
+
+def test_an_unchanged_fleet_with_a_broken_bag_is_up_to_date_and_a_transient_failure_is_retried(
+    fleet: Path, tmp_path: Path
+) -> None:
+    """A fleet nearly always holds a bag that cannot be converted: that bag, unchanged, fails the same way,
+    so a re-run with --overwrite is still up to date (the bag listed as not tried again); changed, or failed
+    for a transient reason (not the bag's fault), it is tried again, and an append retries only the latter."""
+    broken = tmp_path / "broken.mcap"
+    broken.write_bytes(b"not a bag at all")
+    manifest = tmp_path / "manifest.yaml"
+    manifest.write_text(f"bags:\n  - uri: {fleet / 'a'}\n  - uri: {broken}\n")
+    config = ConvertConfig(
+        manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output=str(tmp_path / "ds"),
+        staging=str(tmp_path / "staging"), encoder=FAST_CODEC, overwrite=True,
+    )  # fmt: skip
+    plan = plan_run(config)
+    report = reduce_run(plan, *_convert_all(plan))
+    assert (report.episodes, len(report.excluded)) == (1, 1)
+    again = plan_run(config)
+    assert (again.up_to_date, again.requests, len(again.reused)) == (True, (), 1)
+    assert [f.bag_uri for f in again.settled_failures] == [str(broken)]
+    assert [row.bag_uri for row in finish_up_to_date(again).excluded] == [str(broken)]
+    # the broken bag rewritten (another stamp): not up to date, it is tried again
+    broken.write_bytes(b"still not a bag, but other bytes")
+    assert str(broken) in [r.bag_uri for r in plan_run(config).requests]
+    # a run whose broken bag failed for a transient reason: never up to date, and an append retries it
+    plan = plan_run(config)
+    reduce_run(plan, *_convert_all(plan, retryable=True))
+    again = plan_run(config)
+    assert not again.up_to_date and str(broken) in [r.bag_uri for r in again.requests]
+    appending = plan_run(config.model_copy(update={"overwrite": False, "append": True}))
+    assert [r.bag_uri for r in appending.requests] == [str(broken)]

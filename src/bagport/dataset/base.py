@@ -26,7 +26,7 @@ from bagport.dataset.sketches import DatasetSketches, read_sketches
 from bagport.errors import DatasetWriteError
 from bagport.stats import FeatureStats, stats_from_json
 
-__all__ = ["DatasetBase", "read_base", "record_string", "record_tail"]
+__all__ = ["DatasetBase", "read_base", "record_head", "record_string", "record_tail"]
 
 _CHUNK_FILE = re.compile(r"chunk-(\d+)/file-(\d+)\.\w+$")
 
@@ -83,6 +83,23 @@ def _read_json(fs: AbstractFileSystem, path: str) -> Any:
 _TOP_FILES = b'\n  "files": '
 """Where the ``files`` digests start in a run record (written as ``json.dumps(indent=2)`` writes it: a
 top-level key is the only text at two spaces' indent, strings hold no raw newline)."""
+
+
+_TOP_EPISODES = b'\n  "episodes": '
+
+
+def record_head(raw: bytes) -> dict[str, Any]:
+    """A run record's entries before its episodes (the contract, the manifest, the exclusions and failures):
+    parsed without the episodes' entries, which follow; any other layout is parsed whole."""
+    at = raw.find(_TOP_EPISODES)
+    if at >= 0:
+        try:
+            head: dict[str, Any] = json.loads(raw[:at].rstrip().rstrip(b",") + b"\n}")
+            return head
+        except json.JSONDecodeError:
+            pass
+    whole: dict[str, Any] = json.loads(raw)
+    return whole
 
 
 def record_tail(raw: bytes) -> dict[str, Any]:

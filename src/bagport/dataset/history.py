@@ -8,7 +8,7 @@ from typing import Any
 import pandas as pd
 from fsspec.core import url_to_fs
 
-from bagport.dataset.base import read_base, record_string, record_tail
+from bagport.dataset.base import read_base, record_head, record_string, record_tail
 from bagport.dataset.checksums import latest_record
 from bagport.dataset.layout import (
     APPEND_RUN_RECORD_PATH,
@@ -19,14 +19,15 @@ from bagport.dataset.layout import (
 )
 from bagport.dataset.write import DatasetReport
 
-__all__ = ["converted_bags", "dataset_report", "record_exclusions", "recorded_write_key"]
+__all__ = ["converted_bags", "dataset_report", "record_exclusions", "recorded_failures", "recorded_write_key"]
 
 
 def converted_bags(root: str) -> set[tuple[str, str]]:
     """``(bag URI, source stamp)`` of every episode in the dataset at ``root``.
 
     Bags a run excluded (failed QA or conversion) are in the set too, so an unchanged bad bag is not
-    retried by every scheduled run; a bag re-recorded or changed since (another stamp) converts again.
+    retried by every scheduled run; a bag re-recorded or changed since (another stamp) converts again, as
+    does one whose failure was not its own (recorded without a stamp: a transient I/O error).
     """
     fs, path = url_to_fs(root)
     found: set[tuple[str, str]] = set()
@@ -100,3 +101,17 @@ def recorded_write_key(root: str) -> str | None:
     if not files <= listed or not readable <= files:
         return None
     return key
+
+
+def recorded_failures(root: str) -> list[dict[str, Any]]:
+    """The bags the run that wrote the dataset at ``root`` could not convert for their own sake (its run
+    record's ``failures``: manifest entry, bag URI, segment, error, the bag's source stamp then); a
+    failure that was not the bag's (a transient I/O error) is not among them. Empty when none is recorded."""
+    fs, path = url_to_fs(root)
+    try:
+        with fs.open(f"{path.rstrip('/')}/{RUN_RECORD_PATH}", "rb") as handle:
+            raw = handle.read()
+    except FileNotFoundError:
+        return []
+    failures = record_head(raw).get("failures", [])
+    return [f for f in failures if isinstance(f, dict)] if isinstance(failures, list) else []

@@ -165,6 +165,15 @@ class ConvertConfig(BaseModel):
         return self
 
     @model_validator(mode="after")
+    def _replace_or_add(self) -> ConvertConfig:
+        if self.overwrite and self.append:
+            raise ValueError(
+                "overwrite and append both given: --overwrite replaces the dataset, --append adds to it; "
+                "give one (to append with a --config file that sets overwrite: true, take that line out)"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _address_of_its_runner(self) -> ConvertConfig:
         for runner, name in RUNNER_ADDRESSES.items():
             address = getattr(self, name)

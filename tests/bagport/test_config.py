@@ -45,3 +45,11 @@ def test_without_lerobot_the_first_format_goes_to_output() -> None:
 def test_refused_formats(values: dict[str, object], message: str) -> None:
     with pytest.raises(pydantic.ValidationError, match=message):
         _config(**values)
+
+
+def test_overwrite_and_append_together_are_refused() -> None:
+    """One replaces the dataset, the other adds to it: both given (a run file's overwrite: true and --append
+    on the command line) is an error, not a silent append."""
+    with pytest.raises(pydantic.ValidationError, match="overwrite and append both given"):
+        _config(overwrite=True, append=True)
+    assert _config(append=True).append and _config(overwrite=True).overwrite

@@ -250,22 +250,25 @@ def up_to_date(report: DatasetReport) -> bool:
 
 
 def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -> None:
-    """Before anything converts: an append whose contract gives other features (or fps) than the
+    """Before anything converts: an append whose contract gives other features (or fps, or robot type) than the
     dataset's ``meta/info.json`` would be refused after converting every bag."""
     info = read_base(config.output).info
     have = sorted(set(info["features"]) - set(DEFAULT_FEATURES))
     want = sorted(f.key for f in contract.features)
-    if have == want and info["fps"] == contract.fps:
+    robot_type = info.get("robot_type")
+    if have == want and info["fps"] == contract.fps and robot_type in (None, contract.robot_type):
         return
     differences = (
         [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
     )
+    if robot_type not in (None, contract.robot_type):  # info.json has one: it would relabel every episode
+        differences.append(f"robot_type: dataset {robot_type!r}, contract {contract.robot_type!r}")
     if only_dataset := [k for k in have if k not in want]:
         differences.append(f"only in the dataset: {', '.join(only_dataset)}")
     if only_contract := [k for k in want if k not in have]:
         differences.append(f"only in the contract: {', '.join(only_contract)}")
     raise DatasetWriteError(
-        f"cannot append to {config.output} with {config.contract}: its features differ from the dataset's "
+        f"cannot append to {config.output} with {config.contract}: the contract does not match the dataset "
         f"({'; '.join(differences)}); nothing was converted. Fix: append with the contract the dataset was "
         "made with, or convert into a new --output."
     )

@@ -171,6 +171,14 @@ def test_an_incompatible_append_is_refused_before_anything_converts(tmp_path: Pa
         DatasetWriteError, match=r"only in the dataset: observation\.images\.wrist.*nothing was"
     ):
         plan_run(config.model_copy(update={"contract": str(no_wrist)}))
+    # the same features for another robot: info.json holds one robot type, which would relabel the dataset
+    other_robot = tmp_path / "other_robot.yaml"
+    other_robot.write_text(text.replace("robot_type: bagport_sample_arm", "robot_type: other_arm", 1))
+    with pytest.raises(
+        DatasetWriteError,
+        match=r"robot_type: dataset 'bagport_sample_arm', contract 'other_arm'.*nothing was",
+    ):
+        plan_run(config.model_copy(update={"contract": str(other_robot)}))
 
 
 def test_a_plan_is_up_to_date_only_when_the_dataset_is_what_it_would_write(tmp_path: Path) -> None:

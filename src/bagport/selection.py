@@ -159,7 +159,10 @@ def _nothing_kept_error(entries: Sequence[QAEntry]) -> QualityError:
     if any(e.qa.error is not None and not e.by_label for e in entries):
         fixes.append("correct what each conversion error above names (each ends with its own fix)")
     if any(e.qa.error is None and not e.by_label for e in entries):
-        fixes.append("relax configs/qa.yaml thresholds or pass --on-qa-fail keep to keep failing episodes")
+        fixes.append(
+            "relax the QA thresholds of your --qa file (bagport's defaults: configs/qa.yaml) or pass --on-qa-fail "
+            "keep to keep failing episodes"
+        )
     if any(e.by_label for e in entries):
         fixes.append("pass --keep-failed to keep episodes labelled failed or discarded")
     return QualityError(

@@ -49,12 +49,12 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
             "must be a YAML mapping with robot_type, fps, observations, actions",
             file=name,
             line=1,
-            fix="see the contract format in the README.",
+            fix="see the contract format in docs/contracts.md.",
         )
     try:
         contract = Contract.model_validate(source.data)
     except pydantic.ValidationError as err:
-        default_fix = "see the contract format in the README."
+        default_fix = "see the contract format in docs/contracts.md."
         problem = explain_validation(err, source, Contract, default_fix)
         last = problem.field.rsplit(".", 1)[-1].split("[", 1)[0]
         fix = _FIELD_FIXES.get(last, problem.fix) if problem.fix == default_fix else problem.fix

@@ -31,7 +31,7 @@ from bagport.dataset.free_memory import release_unused_memory
 from bagport.dataset.meta import EpisodeStats
 from bagport.dataset.sketches import DatasetSketches
 from bagport.qa import QABrief, QAConfig, QAEntry
-from bagport.qa.fleet import INDEX_SCHEMA, detail_path, index_table, render_fleet_page
+from bagport.qa.fleet import INDEX_SCHEMA, detail_path, index_table, metadata_json, render_fleet_page
 from bagport.qa.jumps import step_outlier_checks
 from bagport.qa.report import Names, render_episode_page
 from bagport.staging import StagedFeature
@@ -52,7 +52,7 @@ QA_SUMMARY_PATH = "meta/qa/summary.json"
 QA_REPORT_PATH = "meta/qa/report.html"
 QA_INDEX_PATH = "meta/qa/index/run-{run:03d}.parquet"
 _BRIEF_KEYS = tuple(f.name for f in fields(QABrief) if f.name in INDEX_SCHEMA.names)
-"""A :class:`~bagport.qa.QABrief`'s fields the QA index keeps (all but its metadata and source stamp), in
+"""A :class:`~bagport.qa.QABrief`'s fields the QA index keeps (all but its source stamp; the metadata as JSON), in
 the brief's order: one ``summary.json`` episode."""
 
 
@@ -154,7 +154,8 @@ def _migrate_legacy_summary(root: Path, run_number: int, previous: str) -> None:
     with fs.open(summary_path, "r", encoding="utf-8") as handle:
         legacy = json.load(handle).get("episodes", [])
     rows = [
-        {**{k: e.get(k) for k in _BRIEF_KEYS}, "run": 0, "position": n, "name": str(e["bag_uri"]).rsplit("/", 1)[-1],
+        {**{k: e.get(k) for k in _BRIEF_KEYS}, "metadata": metadata_json(e.get("metadata")), "run": 0,
+         "position": n, "name": str(e["bag_uri"]).rsplit("/", 1)[-1],
          "robot_type": "", "folder": str(e["bag_uri"]).rsplit("/", 1)[0], "day": "unknown",
          "fails": [], "warns": [], "detail": False}
         for n, e in enumerate(legacy)
@@ -218,7 +219,10 @@ def write_qa(
 
 def _write_summary(root: Path, index: pa.Table, config: dict[str, Any]) -> None:
     """``summary.json`` from every run's index (its rows gone before the fleet page builds its own)."""
-    episodes = [{k: row[k] for k in _BRIEF_KEYS} for row in index.select(list(_BRIEF_KEYS)).to_pylist()]
+    episodes = [
+        {**{k: row[k] for k in _BRIEF_KEYS}, "metadata": json.loads(row["metadata"] or "{}")}
+        for row in index.select(list(_BRIEF_KEYS)).to_pylist()
+    ]
     summary = {
         "episodes": episodes,
         "kept": sum(e["episode_index"] is not None for e in episodes),

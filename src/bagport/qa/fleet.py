@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 import posixpath
 from collections import Counter, defaultdict
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from datetime import UTC, datetime
 from html import escape
 from importlib.resources import files
@@ -27,7 +27,7 @@ from bagport.qa.plots import score_histogram
 from bagport.qa.report import CSS
 from bagport.qa.result import QAEntry
 
-__all__ = ["INDEX_SCHEMA", "detail_path", "index_table", "render_fleet_page"]
+__all__ = ["INDEX_SCHEMA", "detail_path", "index_table", "metadata_json", "render_fleet_page"]
 
 _INDEX_FIELDS: list[tuple[str, pa.DataType]] = [
     ("run", pa.int64()),
@@ -54,6 +54,7 @@ _INDEX_FIELDS: list[tuple[str, pa.DataType]] = [
     ("fails", pa.list_(pa.string())),
     ("warns", pa.list_(pa.string())),
     ("detail", pa.bool_()),
+    ("metadata", pa.string()),  # the manifest entry's columns and the recorder's episode_id, as JSON
 ]
 INDEX_SCHEMA = pa.schema(_INDEX_FIELDS)
 _VERDICTS = ("pass", "warn", "fail")
@@ -80,6 +81,12 @@ def _day(entry: QAEntry) -> str:
     return datetime.fromtimestamp(int(window[0]) / 1e9, tz=UTC).strftime("%Y-%m-%d")
 
 
+def metadata_json(metadata: Mapping[str, Any] | None) -> str | None:
+    """An episode's metadata as the index keeps it (``None``: none); an index written before this column
+    reads back as ``None`` too."""
+    return json.dumps(dict(metadata), separators=(",", ":"), default=str) if metadata else None
+
+
 def index_table(entries: Sequence[QAEntry], run: int, robot_type: str) -> pa.Table:
     """This run's rows of the index; ``detail`` is true for warned and failed episodes."""
     rows: dict[str, list[Any]] = {name: [] for name in INDEX_SCHEMA.names}
@@ -96,6 +103,7 @@ def index_table(entries: Sequence[QAEntry], run: int, robot_type: str) -> pa.Tab
             "fails": sorted({c.check for c in entry.qa.checks if c.verdict == "fail"}),
             "warns": sorted({c.check for c in entry.qa.checks if c.verdict == "warn"}),
             "detail": entry.qa.verdict != "pass",
+            "metadata": metadata_json(entry.metadata),
         }
         for name, column in rows.items():
             column.append(values.get(name))

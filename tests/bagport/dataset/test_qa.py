@@ -5,6 +5,7 @@ written before the index existed is migrated from its summary.json once."""
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from pathlib import Path
 
 import pyarrow.parquet as pq
@@ -39,3 +40,32 @@ def test_a_dataset_without_index_is_migrated_from_its_summary_once(tmp_path: Pat
     summary = json.loads((tmp_path / QA_SUMMARY_PATH).read_text())
     assert len(summary["episodes"]) == 28  # every run once: the legacy rows are not read twice
     assert pq.read_table(tmp_path / QA_INDEX_PATH.format(run=0)).num_rows == 20
+
+
+def test_the_summary_lists_each_episodes_metadata_across_runs(tmp_path: Path) -> None:
+    """The manifest's columns (robot_id...) of every episode, kept or excluded, in summary.json: from this
+    run's index, an earlier run's, a legacy summary migrated, and an index written before the column (none)."""
+    first = [
+        replace(e, metadata={"robot_id": f"r{n}", "collection_date": "2026-11-01"})
+        for n, e in enumerate(synth_qa_entries(3, seed=1))
+    ]
+    write_qa(tmp_path, first, {"fps": 30}, {}, 0)
+    summary = json.loads((tmp_path / QA_SUMMARY_PATH).read_text())
+    assert [e["metadata"] for e in summary["episodes"]] == [e.metadata for e in first]
+    (
+        tmp_path / QA_INDEX_PATH.format(run=0)
+    ).unlink()  # as an older bagport wrote it: migrated from summary.json
+    write_qa(
+        tmp_path,
+        [replace(e, metadata={"robot_id": "r9"}) for e in synth_qa_entries(1, seed=2)],
+        {"fps": 30},
+        {},
+        1,
+    )
+    summary = json.loads((tmp_path / QA_SUMMARY_PATH).read_text())
+    assert [e["metadata"] for e in summary["episodes"]] == [*(e.metadata for e in first), {"robot_id": "r9"}]
+    index = tmp_path / QA_INDEX_PATH.format(run=1)  # an index from before the metadata column
+    pq.write_table(pq.read_table(index).drop_columns(["metadata"]), index)
+    write_qa(tmp_path, synth_qa_entries(1, seed=3), {"fps": 30}, {}, 2)
+    summary = json.loads((tmp_path / QA_SUMMARY_PATH).read_text())
+    assert [e["metadata"] for e in summary["episodes"]][3:] == [{}, {}]

@@ -167,8 +167,9 @@ def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
         )
     if append and not report.converted and not report.reused:
         return (
-            f"nothing to do: every bag is in {report.root} already ({report.episodes} episode(s), "
-            f"{report.duration_s:.1f} s of recordings); checked in {wall_s:.1f} s"
+            f"nothing to do: every bag is in {report.root} already, or was left out of it by an earlier run and "
+            f"is unchanged since ({report.episodes} episode(s), {report.duration_s:.1f} s of recordings); checked "
+            f"in {wall_s:.1f} s"
         )
     from flows.run_story import RunCounts  # noqa: PLC0415 - imports Prefect
 

@@ -113,11 +113,21 @@ def cmd_validate(args: argparse.Namespace) -> int:
 
 
 def cmd_repair(args: argparse.Namespace) -> int:
+    from fsspec.core import url_to_fs  # noqa: PLC0415
+
     from bagport.dataset.repair import repair_dataset  # noqa: PLC0415
 
     report = repair_dataset(args.output, clean_scratch=True)
     for action in report.actions:
         print(action)
+    fs, path = url_to_fs(args.output)
+    if not report.actions and not fs.exists(path):  # a mistyped path: not "nothing to repair"
+        print(
+            f"bagport repair: {args.output} does not exist, so there is nothing there to repair. Fix: give the "
+            "dataset's folder or URI as given to convert --output.",
+            file=sys.stderr,
+        )
+        return 2
     if not report.actions:
         print(f"{args.output}: nothing to repair")
     return 0

@@ -177,3 +177,14 @@ def test_the_exit_code_comes_from_the_error_type_not_its_text(
 
     monkeypatch.setattr(flows.cli_commands, "cmd_synth", fail)
     assert main(["synth", "--out", str(tmp_path / "x")]) == code
+
+
+def test_repair_of_a_path_that_does_not_exist_is_an_error_not_nothing_to_repair(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    code, err = _run(["repair", str(tmp_path / "typo")], capfd)
+    assert code == 2
+    assert "typo does not exist, so there is nothing there to repair. Fix: " in err
+    (tmp_path / "ds").mkdir()
+    assert main(["repair", str(tmp_path / "ds")]) == 0
+    assert "nothing to repair" in capfd.readouterr().out

@@ -73,7 +73,7 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
         from bagport.errors import BagportError  # noqa: PLC0415
         from bagport.qa import episode_ref  # noqa: PLC0415
         from bagport.reduce import finish_up_to_date, summary_json  # noqa: PLC0415
-        from bagport.run import plan_run  # noqa: PLC0415
+        from bagport.run import plan_run, up_to_date  # noqa: PLC0415
         from flows.cli_config import convert_config  # noqa: PLC0415
         from flows.cli_push import hf_token, push_from_args  # noqa: PLC0415
 
@@ -116,8 +116,9 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     print(_summary_line(report, args.append, wall_s), file=sys.stderr)
     if args.push_to_hub:
         push_from_args(report.outputs.get("lerobot", report.root), config.resolved_repo_id(), args)
-    # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run
-    return 1 if any(not row.excluded_by_label for row in report.excluded) else 0
+    # episodes left out for their label (failed / discarded demonstrations) are not a problem of the run, nor
+    # are the failed bags of an up-to-date dataset (reported by the run that wrote it, unchanged since)
+    return 1 if not up_to_date(report) and any(not row.excluded_by_label for row in report.excluded) else 0
 
 
 def _run_flow(

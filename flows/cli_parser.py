@@ -71,7 +71,10 @@ def _add_convert(sub: Subparsers, handler: Handler) -> None:
     add_push_options(convert)
     loudness = convert.add_mutually_exclusive_group()
     loudness.add_argument(
-        "--quiet", action="store_true", help="no progress bar and no JSON summary; errors still print"
+        "--quiet",
+        action="store_true",
+        help="no progress bar and no JSON summary; errors, excluded bags and the one-line summary still print "
+        "(on stderr)",
     )
     loudness.add_argument("--verbose", action="store_true", help="show Prefect's flow and task logs")
     convert.set_defaults(func=handler)

@@ -389,3 +389,30 @@ def test_batches_keep_every_worker_busy_to_the_end_and_stay_bounded() -> None:
             task_runs = -(-episodes // size)
             assert 1 <= size <= flows.convert.MAX_BATCH
             assert task_runs >= min(episodes, flows.convert.TASK_RUNS_PER_WORKER * workers)
+
+
+def test_an_unchanged_broken_bag_does_not_stop_a_rerun_from_being_up_to_date(
+    prefect: None, bags: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A fleet with a bag that cannot be converted: the re-run is up to date, says the bag was not tried
+    again, and exits 0 (the first run reported it, exit 1); nothing is submitted or written."""
+    (bags / "broken.mcap").write_bytes(b"not a bag")
+    manifest = bags / "with_broken.yaml"
+    manifest.write_text(yaml.safe_dump({"bags": [{"uri": "bag_004"}, {"uri": "broken.mcap"}]}))
+    out = tmp_path / "ds"
+    report, _ = _convert(manifest, out, tmp_path / "staging")
+    assert (report.episodes, len(report.excluded)) == (1, 1)
+    first = _files(out)
+    codec = tmp_path / "codec.yaml"
+    codec.write_text(yaml.safe_dump(FAST_CODEC))
+    capsys.readouterr()
+    SUBMITTED.clear()
+    argv = [
+        "convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--output", str(out),
+        "--staging", str(tmp_path / "staging"), "--overwrite", "--runner", "thread", "--workers", "1",
+        "--codec", str(codec),
+    ]  # fmt: skip
+    assert main(argv) == 0
+    assert SUBMITTED == [] and _files(out) == first
+    err = capsys.readouterr().err
+    assert "up to date: 1 episode(s) reused, 1 bag(s) that failed to convert before and are unchanged" in err

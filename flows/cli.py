@@ -166,7 +166,7 @@ def _summary_line(report: DatasetReport, append: bool, wall_s: float) -> str:
             f"(its run record has this run's write key; {report.episodes} episode(s), {report.duration_s:.1f} s "
             f"of recordings); checked in {wall_s:.1f} s"
         )
-    if append and not report.converted and not report.reused:
+    if append and not report.converted and not report.reused and not report.excluded:
         return (
             f"nothing to do: every bag is in {report.root} already, or was left out of it by an earlier run and "
             f"is unchanged since ({report.episodes} episode(s), {report.duration_s:.1f} s of recordings); checked "

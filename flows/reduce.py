@@ -109,7 +109,7 @@ def reduce_dataset(
                 qa=start.entries,
                 qa_config=plan.qa.model_dump(mode="json"),
             )
-            report = commit_reduce(plan, staged, failures, start, lerobot)
+            report = commit_reduce(plan, staged, start, lerobot)
     except BagportError as err:  # a staged episode gone, a dataset that may not be replaced, the commit
         return failed_with(err)
     log_report(report)

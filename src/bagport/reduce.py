@@ -190,11 +190,7 @@ def start_reduce(
 
 
 def commit_reduce(
-    plan: RunPlan,
-    staged: Sequence[PlannedEpisode],
-    failures: Sequence[EpisodeFailure],
-    start: ReduceStart,
-    lerobot: DatasetReport | None,
+    plan: RunPlan, staged: Sequence[PlannedEpisode], start: ReduceStart, lerobot: DatasetReport | None
 ) -> DatasetReport:
     """After the LeRobot dataset (``lerobot``, when asked for) is written: the same kept episodes, from the
     same staging, into every other format (no second read of the bags), then the staging clean-up."""
@@ -210,7 +206,7 @@ def commit_reduce(
     if not plan.config.keep_staging:
         _remove_staged(plan, [e.dir_uri for e in staged])
     reused = tuple(episode_ref(e.bag_uri, e.segment) for e in staged if e.reused)
-    return replace(report, converted=len(staged) + len(failures) - len(reused), reused=reused)
+    return replace(report, converted=len(staged) - len(reused), reused=reused)  # failures are in excluded
 
 
 def reduce_run(
@@ -236,7 +232,7 @@ def reduce_run(
         if "lerobot" in plan.config.formats
         else None
     )
-    return commit_reduce(plan, staged, failures, start, lerobot)
+    return commit_reduce(plan, staged, start, lerobot)
 
 
 def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:

@@ -188,3 +188,19 @@ def test_repair_of_a_path_that_does_not_exist_is_an_error_not_nothing_to_repair(
     (tmp_path / "ds").mkdir()
     assert main(["repair", str(tmp_path / "ds")]) == 0
     assert "nothing to repair" in capfd.readouterr().out
+
+
+def test_an_append_whose_new_bags_all_failed_is_not_nothing_to_do() -> None:
+    from bagport.dataset import DatasetReport  # noqa: PLC0415
+    from bagport.qa import EpisodeQA, QAEntry  # noqa: PLC0415
+    from flows.cli import _summary_line  # noqa: PLC0415
+
+    failed = QAEntry(
+        EpisodeQA.failed("new.mcap", "not a bag"), 2, None, excluded_reason="conversion failed"
+    ).brief()
+    report = DatasetReport("ds", 2, 60, ("t",), (), 1, 2.0, excluded=(failed,), qa=(failed,))
+    line = _summary_line(report, True, 1.0)
+    assert line.startswith("this run: 0 episode(s) converted") and "1 excluded" in line
+    assert _summary_line(DatasetReport("ds", 2, 60, ("t",), (), 1, 2.0), True, 1.0).startswith(
+        "nothing to do"
+    )

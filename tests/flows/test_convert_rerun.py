@@ -401,7 +401,7 @@ def test_an_unchanged_broken_bag_does_not_stop_a_rerun_from_being_up_to_date(
     manifest.write_text(yaml.safe_dump({"bags": [{"uri": "bag_004"}, {"uri": "broken.mcap"}]}))
     out = tmp_path / "ds"
     report, _ = _convert(manifest, out, tmp_path / "staging")
-    assert (report.episodes, len(report.excluded)) == (1, 1)
+    assert (report.episodes, len(report.excluded), report.converted) == (1, 1, 1)
     first = _files(out)
     codec = tmp_path / "codec.yaml"
     codec.write_text(yaml.safe_dump(FAST_CODEC))

@@ -56,7 +56,8 @@ class DatasetReport:
     qa_report: str | None = None
     """The HTML QA report in the dataset (``meta/qa/report.html``: every run, rebuilt by each one)."""
     converted: int = 0
-    """Episodes this run converted (or tried to); the others came from the staging store as they were."""
+    """Episodes this run converted (a bag that failed to is in :attr:`excluded`); the others came from the
+    staging store as they were."""
     reused: tuple[str, ...] = ()
     """Episodes taken from the staging store without converting them again (bag URI, ``#<n>`` for a split bag)."""
     outputs: dict[str, str] = field(default_factory=dict)

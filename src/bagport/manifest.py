@@ -30,7 +30,7 @@ from bagport.errors import ManifestError
 from bagport.manifest_csv import csv_entries
 from bagport.timewindow import WHOLE_BAG, TimeWindow
 from bagport.uris import is_local, protocol_of
-from bagport.yamlsource import YamlJson, load_yaml, primary_error
+from bagport.yamlsource import YamlJson, explain_validation, load_yaml, primary_error
 
 __all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
 
@@ -165,15 +165,17 @@ def _yaml_model(text: str, source: str) -> _Manifest:
         first = primary_error(err)
         loc = tuple(first["loc"])
         entry = loc[1] if len(loc) > 1 and loc[0] == "bags" and isinstance(loc[1], int) else None
-        line = parsed.line_of(loc)
-        where = ".".join(str(p) for p in loc) or "top level"
+        problem = explain_validation(
+            err,
+            parsed,
+            _Manifest,
+            "a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries.",
+        )  # a misspelt key gets the nearest one ("did you mean 'uri'?")
         raise ManifestError(
-            f"line {line}: {where}: {first['msg']}",
+            f"line {problem.line}: {problem.field or 'top level'}: {problem.what}",
             file=source,
             entry=entry,
-            fix=_NOT_JSON_FIX
-            if first["type"] == "invalid-json-value"
-            else "a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries.",
+            fix=_NOT_JSON_FIX if first["type"] == "invalid-json-value" else problem.fix,
         ) from err
     return model
 

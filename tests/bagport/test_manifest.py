@@ -54,7 +54,14 @@ def test_fsspec_uris(tmp_path: Path) -> None:
         ),
         pytest.param("bags:\n  - uri: '*.nothing'\n", r"bags\[0\]: glob .* matches no bag", id="empty-glob"),
         pytest.param("bags: []\n", r"at least 1", id="empty"),
-        pytest.param("bag:\n  - uri: x\n", r"line 1: bag: Extra inputs", id="typo-top"),
+        pytest.param(
+            "bag:\n  - uri: x\n", r"line 1: bag: unknown field.*Fix: did you mean 'bags'", id="typo-top"
+        ),
+        pytest.param(
+            "bags:\n  - url: a.mcap\n",
+            r"line 2: bags\[0\]\.url: unknown field.*Fix: did you mean 'uri'",
+            id="typo-uri",
+        ),
         pytest.param("bags:\n  - {uri: a.mcap}\n  - {url: b.mcap}\n", r"bags\[1\].*line 3", id="entry-field"),
         pytest.param("bags: [\n", r"not valid YAML", id="bad-yaml"),
         pytest.param(
@@ -72,7 +79,7 @@ def test_fsspec_uris(tmp_path: Path) -> None:
         ),
         pytest.param(
             "bags:\n  - uri: a.mcap\n    metadata: {robot_id: arm-1, raw: !!binary aGk=}\n",
-            r"bags\[0\].*line 3: bags\.0\.metadata\.raw: .*not a valid JSON value.*Fix: .*JSON values",
+            r"bags\[0\].*line 3: bags\[0\]\.metadata\.raw: .*not a valid JSON value.*Fix: .*JSON values",
             id="metadata-not-json",
         ),
     ],

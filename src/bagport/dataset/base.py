@@ -138,8 +138,8 @@ def read_base(root: str | Path) -> DatasetBase:
     path = path.rstrip("/")
     if not fs.isfile(f"{path}/{INFO_PATH}"):
         raise DatasetWriteError(
-            f"{root} is not a LeRobot dataset (no {INFO_PATH}); nothing was written. Fix: --append needs an "
-            "existing bagport dataset at --output, or leave --append out to create one."
+            f"{root} is not a LeRobot dataset (no {INFO_PATH}); nothing was written. Fix: point --output at the "
+            "dataset to append to, or write a new dataset to a new --output (without --append)."
         )
     info = _read_json(fs, f"{path}/{INFO_PATH}")
     raw_histograms = (

@@ -31,8 +31,9 @@ def refuse_existing(output: str, *, overwrite: bool, inputs: Sequence[str] = ())
         return
     if not overwrite:
         raise DatasetWriteError(
-            f"{output} already exists; nothing was written. Fix: choose a new --output, or pass --overwrite "
-            "to replace it (the old one is kept until the new one is complete)."
+            f"{output} already exists; nothing was written. Fix: choose a new --output, pass --overwrite to "
+            "replace it (the old one is kept until the new one is complete), or --append to add the manifest's "
+            "new bags to a LeRobot dataset there."
         )
     if not _a_dataset_or_empty(fs, out_path):
         raise DatasetWriteError(

@@ -51,11 +51,18 @@ def _cmd_convert(args: argparse.Namespace) -> int:
 
 
 def _option_errors(err: pydantic.ValidationError) -> str:
-    """Pydantic's findings about the options, one clause each, without its URLs."""
+    """Pydantic's findings about the options, one clause each, without its URLs; a missing option named
+    as the user gives it (its flag, or its key in --config)."""
+    from bagport.config import ConvertConfig, cli_option  # noqa: PLC0415
+
+    fields = ConvertConfig.model_fields
     clauses = []
     for item in err.errors():
         where = ".".join(str(part) for part in item["loc"])
         message = item["msg"].removeprefix("Value error, ")
+        if item["type"] == "missing" and where in fields:
+            flag = cli_option(where, fields[where]).flag
+            message = f"required: give {flag} (or {where}: in a --config file)"
         clauses.append(f"{where}: {message}" if where else message)
     return "; ".join(clauses)
 

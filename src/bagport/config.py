@@ -161,7 +161,9 @@ class ConvertConfig(BaseModel):
     @model_validator(mode="after")
     def _one_bag_source(self) -> ConvertConfig:
         if (self.manifest is None) == (self.bags_glob is None):
-            raise ValueError("give exactly one of manifest and bags_glob")
+            raise ValueError(
+                "give exactly one of --manifest and --glob (manifest or bags_glob in a --config file)"
+            )
         return self
 
     @model_validator(mode="after")

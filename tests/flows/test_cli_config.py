@@ -164,3 +164,10 @@ def test_the_example_run_yaml_is_a_valid_config() -> None:
         ("lerobot", "hdf5"),
     )
     assert config.encoder == load_encoder("h264-fast")
+
+
+def test_a_missing_option_is_named_as_the_user_gives_it(capfd: pytest.CaptureFixture[str]) -> None:
+    assert main(["convert", "--manifest", "m.yaml", "--output", "out"]) == 2
+    assert "contract: required: give --contract (or contract: in a --config file)" in capfd.readouterr().err
+    assert main(["convert", "--contract", "c.yaml", "--output", "out"]) == 2
+    assert "give exactly one of --manifest and --glob" in capfd.readouterr().err

@@ -31,7 +31,12 @@ def read_text(uri: str, what: str) -> str:
         with fsspec.open(uri, "r", encoding="utf-8") as handle:
             return str(handle.read())
     except FileNotFoundError as err:
-        raise ContractError(f"{what} file does not exist", file=uri, fix=f"check the --{what} path.") from err
+        raise ContractError(
+            f"{what} file does not exist",
+            file=uri,
+            fix=f"check the path given as --{what} (or {what}: in a --config file); a relative path is relative "
+            "to the working directory.",
+        ) from err
 
 
 def require_bucket(fs: AbstractFileSystem, path: str, uri: str) -> None:

@@ -9,8 +9,9 @@ import pytest
 from s3fs import S3FileSystem
 
 from bagport.config import ConvertConfig
-from bagport.errors import DatasetWriteError
+from bagport.errors import ContractError, DatasetWriteError
 from bagport.run import plan_run
+from bagport.uris import read_text
 from flows.cli import main
 from tests.helpers import SAMPLE_CONTRACT
 from tests.s3 import moto_s3
@@ -64,3 +65,9 @@ def test_output_in_a_missing_bucket_is_refused_and_no_bucket_is_made(
     assert code == 2
     assert "bagport convert: error: s3://typo-bucket/o: the bucket 'typo-bucket' does not exist" in err
     assert "Traceback" not in err
+
+
+def test_a_missing_contract_or_qa_file_names_both_places_it_may_come_from(tmp_path: Path) -> None:
+    with pytest.raises(ContractError, match=r"contract file does not exist") as err:
+        read_text(str(tmp_path / "robot.yaml"), "contract")
+    assert "Fix: check the path given as --contract (or contract: in a --config file)" in str(err.value)

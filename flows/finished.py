@@ -31,7 +31,7 @@ def not_the_bags_fault(state: State[Any]) -> bool:
     if state.is_crashed() or state.is_cancelled():
         return True
     try:
-        raised = state.result(raise_on_failure=False)
+        raised = state.result(raise_on_failure=False, retry_result_failure=False)  # never waits
     except Exception:
         return False
     return isinstance(raised, TransientError)

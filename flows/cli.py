@@ -76,10 +76,9 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     with paused():  # the heavy imports (flows/import_gc.py)
         import pydantic  # noqa: PLC0415
 
-        from bagport.dataset.history import dataset_report  # noqa: PLC0415
         from bagport.errors import BagportError  # noqa: PLC0415
         from bagport.qa import episode_ref  # noqa: PLC0415
-        from bagport.reduce import finish_up_to_date, summary_json  # noqa: PLC0415
+        from bagport.reduce import finish_nothing_new, finish_up_to_date, summary_json  # noqa: PLC0415
         from bagport.run import plan_run, up_to_date  # noqa: PLC0415
         from flows.cli_config import convert_config  # noqa: PLC0415
         from flows.cli_push import hf_token, push_from_args  # noqa: PLC0415
@@ -102,7 +101,7 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     plan = plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
     if throwaway_api and (plan.up_to_date or (not plan.requests and not plan.reused)):
         # up to date, or an append with nothing new
-        report = finish_up_to_date(plan) if plan.up_to_date else dataset_report(config.output)
+        report = finish_up_to_date(plan) if plan.up_to_date else finish_nothing_new(plan)
         if show_bar:
             print(file=sys.stderr)  # ends the "starting" line
     else:

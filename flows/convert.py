@@ -20,11 +20,10 @@ from prefect.task_runners import TaskRunner, ThreadPoolTaskRunner
 from bagport.bags import source_stamp
 from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
-from bagport.dataset.history import dataset_report
 from bagport.episode import EpisodeRequest
 from bagport.episode.staged import PlannedEpisode, split_staged
 from bagport.errors import BagportError, QualityError
-from bagport.reduce import finish_up_to_date
+from bagport.reduce import finish_nothing_new, finish_up_to_date
 from bagport.request import EpisodeOutcome
 from bagport.run import EpisodeFailure, RunPlan, plan_run
 from bagport.segment import SegmentedBag, segments_bags
@@ -124,9 +123,10 @@ def _nothing_to_convert(plan: RunPlan) -> DatasetReport | None:
         return unchanged
     if not plan.requests and not plan.reused:  # an append or ingestion run with nothing new
         logger.info(
-            "no new bag: every bag of %s is in %s already", config.manifest or config.bags_glob, config.output
-        )
-        return dataset_report(config.output)
+            "no new bag: every bag of %s is in %s already, or was left out of it and is unchanged",
+            config.manifest or config.bags_glob, config.output,
+        )  # fmt: skip
+        return finish_nothing_new(plan)
     return None
 
 

@@ -58,6 +58,12 @@ def finish_up_to_date(plan: RunPlan) -> DatasetReport:
     return replace(report, reused=reused, converted=0, outputs=plan.config.format_outputs(), excluded=failed)
 
 
+def finish_nothing_new(plan: RunPlan) -> DatasetReport:
+    """The report of an append (or ingestion) run with no new bag: the dataset as it stands, and where
+    each format's output is (as any run's report says)."""
+    return replace(dataset_report(plan.config.output), outputs=plan.config.format_outputs())
+
+
 def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str, Any]:
     reused = [episode_ref(e.bag_uri, e.segment) for e in staged if e.reused]
     return {

@@ -168,6 +168,15 @@ def test_append_of_bags_all_in_the_dataset_submits_nothing_and_exits_0(
     assert "(2 episode(s)" in lines[0]
     assert _dataset(out) == before
     assert elapsed_s < 60  # a generous bound against a hang, not a benchmark (see BENCHMARKS.md W4)
+    # its JSON summary says where the dataset is, as any run's does
+    argv = ["convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--output", str(out)]
+    assert main([*argv, "--append", "--runner", "thread", "--workers", "1"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert (summary["outputs"], summary["converted_now"], summary["episodes"]) == (
+        {"lerobot": str(out)},
+        0,
+        2,
+    )
 
 
 def test_reused_episodes_take_the_current_manifests_entry_order_and_metadata(

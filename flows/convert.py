@@ -310,7 +310,8 @@ def _segments_of(
     future.wait()
     state = future.state
     if not state.is_completed():
-        return [], EpisodeFailure.of(request, state.message or str(state.name))
+        error, retryable = state.message or str(state.name), not_the_bags_fault(state)
+        return [], EpisodeFailure.of(request, error, retryable=retryable)
     found = future.result()
     assert isinstance(found, SegmentedBag)  # completed: the task returned the bag's episodes
     if not found.requests:

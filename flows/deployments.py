@@ -128,7 +128,8 @@ def _finish(kind: str, report: DatasetReport) -> DatasetReport | State[Any]:
 def ingest(config: DeploymentConfig) -> DatasetReport | State[Any]:
     """Append the bags of ``config`` (its ``bags_glob`` or manifest) that the dataset at its ``output`` does
     not hold yet."""
-    return _finish("ingest", run_config(config.convert_config(append=True)))
+    # an ingestion appends: a config written for --overwrite runs (overwrite: true) still ingests
+    return _finish("ingest", run_config(config.convert_config(append=True, overwrite=False)))
 
 
 @flow(name="bagport-reconvert", flow_run_name=lambda: started_name("reconvert"))

@@ -6,9 +6,9 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 from prefect.client.schemas.objects import State
+from prefect.exceptions import FailedRun
 
 from bagport.episode import EpisodeRequest
-from bagport.errors import TransientError
 
 __all__ = ["Finished", "not_the_bags_fault"]
 
@@ -25,13 +25,16 @@ class Finished(NamedTuple):
 
 
 def not_the_bags_fault(state: State[Any]) -> bool:
-    """Whether a task run that did not complete failed for a reason other than its bag: crashed, cancelled,
-    or a transient I/O error still there after Prefect's retries (bagport's own error for a bad bag is a
-    returned Failed state, with no exception)."""
+    """Whether a task run that did not complete failed for a reason other than its bag. Only bagport's own
+    error for a bad bag is the bag's: the task returns it as a Failed state, which carries no exception. A
+    crash, a cancellation, a transient I/O error still there after Prefect's retries, any other exception,
+    or a state whose result cannot be read back is not: a later run tries the bag again rather than skip it
+    for good."""
     if state.is_crashed() or state.is_cancelled():
         return True
     try:
         raised = state.result(raise_on_failure=False, retry_result_failure=False)  # never waits
-    except Exception:
-        return False
-    return isinstance(raised, TransientError)
+    except Exception:  # unknown, so not settled
+        return True
+    # bagport's own Failed state carries no exception (read back as None, or as Prefect's FailedRun wrapper)
+    return isinstance(raised, BaseException) and not isinstance(raised, FailedRun)

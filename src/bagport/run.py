@@ -182,7 +182,8 @@ def write_key(
             )
         ],
         "failures": sorted(
-            [f.manifest_entry, f.bag_uri, -1 if f.segment is None else f.segment, f.error] for f in failures
+            [f.manifest_entry, f.bag_uri, -1 if f.segment is None else f.segment, f.episode_id, f.error]
+            for f in failures
         ),
     }
     text = json.dumps(facts, sort_keys=True, default=str, separators=(",", ":"))
@@ -195,6 +196,7 @@ def failure_key(failure: EpisodeFailure) -> dict[str, Any]:
         "manifest_entry": failure.manifest_entry,
         "bag_uri": failure.bag_uri,
         "segment": failure.segment,
+        "episode_id": failure.episode_id,
         "error": failure.error,
     }
 
@@ -225,8 +227,9 @@ def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
     if recorded == write_key(plan, episodes):
         return replace(plan, requests=(), reused=episodes, up_to_date=True)
     # bags the recorded run could not convert for their own sake, unchanged since, fail the same way
+    # (the same request, as its id says: bag, window, contract, encoder; the same bag files, as its stamp says)
     settled = {
-        (f.get("manifest_entry"), f.get("bag_uri")): f
+        (f.get("manifest_entry"), f.get("episode_id")): f
         for f in recorded_failures(config.output)
         if "error" in f
     }
@@ -234,7 +237,7 @@ def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
         return plan
     failed: list[EpisodeFailure] = []
     for request, episode in zip(plan.requests, unstaged, strict=True):
-        found = settled.get((request.manifest_entry, request.bag_uri))
+        found = settled.get((request.manifest_entry, request.episode_id))
         if found is not None and found.get("source_stamp") == episode.source_stamp:
             failed.append(EpisodeFailure.of(request, str(found["error"])))
     gone = {(f.manifest_entry, f.bag_uri) for f in failed}

@@ -30,6 +30,9 @@ class EpisodeFailure:
     retryable: bool = False
     """Not the bag's fault (a transient I/O error after the retries, a crashed task run): a later run
     tries the bag again, where an unchanged bag that failed for itself is not retried."""
+    episode_id: str = ""
+    """The request's id: the bag's window, the contract, the encoder and the message definitions it was
+    converted with (a failure is settled for these only)."""
 
     @classmethod
     def of(cls, request: EpisodeRequest, error: str, *, retryable: bool = False) -> EpisodeFailure:
@@ -42,6 +45,7 @@ class EpisodeFailure:
             request.note,
             dict(request.metadata),
             retryable,
+            request.episode_id,
         )
 
 

@@ -298,6 +298,12 @@ def test_an_unchanged_fleet_with_a_broken_bag_is_up_to_date_and_a_transient_fail
     assert (again.up_to_date, again.requests, len(again.reused)) == (True, (), 1)
     assert [f.bag_uri for f in again.settled_failures] == [str(broken)]
     assert [row.bag_uri for row in finish_up_to_date(again).excluded] == [str(broken)]
+    # the broken bag given another window (another request): not up to date, it is tried again
+    windowed = tmp_path / "windowed.yaml"
+    windowed.write_text(f"bags:\n  - uri: {fleet / 'a'}\n  - uri: {broken}\n    start_s: 0.5\n")
+    assert str(broken) in [
+        r.bag_uri for r in plan_run(config.model_copy(update={"manifest": str(windowed)})).requests
+    ]
     # the broken bag rewritten (another stamp): not up to date, it is tried again
     broken.write_bytes(b"still not a bag, but other bytes")
     assert str(broken) in [r.bag_uri for r in plan_run(config).requests]

@@ -26,6 +26,8 @@ def prefect() -> Iterator[None]:
 def _failing(request: EpisodeRequest) -> EpisodeSummary:
     if request.bag_uri == "flaky":
         raise TransientError("s3://fleet/flaky: download failed (ConnectionResetError); try again")
+    if request.bag_uri == "buggy":
+        raise RuntimeError("an error bagport did not expect (a bug, an unwrapped I/O error)")
     raise BagReadError("not a bag", uri=request.bag_uri)
 
 
@@ -39,7 +41,11 @@ def test_a_transient_error_after_the_retries_is_not_the_bags_fault(
     state = quick(flaky, label="flaky", return_state=True)
     assert state.is_failed() and not_the_bags_fault(state)
     state = quick(EpisodeRequest("e", "bad", 0, str(tmp_path), "", "c.yaml"), label="bad", return_state=True)
-    assert state.is_failed() and not not_the_bags_fault(state)
+    assert state.is_failed() and not not_the_bags_fault(state)  # bagport's own error for the bag: settled
+    # an error bagport did not expect is not settled either: a later run tries the bag again
+    buggy = EpisodeRequest("e", "buggy", 0, str(tmp_path), "", "c.yaml")
+    state = quick(buggy, label="buggy", return_state=True)
+    assert state.is_failed() and not_the_bags_fault(state)
     # a batch's bag: the same, on its outcome
     monkeypatch.setattr(tasks.episode, "BATCH_RETRY_DELAYS_S", (0, 0))
     bad = EpisodeRequest("e2", "bad", 1, str(tmp_path), "", "c.yaml")

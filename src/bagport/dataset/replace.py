@@ -6,6 +6,7 @@ place with the publish guarantees: locally built beside the target and exchanged
 
 from __future__ import annotations
 
+import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -41,15 +42,21 @@ def refuse_existing(output: str, *, overwrite: bool, inputs: Sequence[str] = ())
             f"(or an empty folder), as it removes everything the output holds; nothing was written. Fix: "
             f"choose a new --output, or move {output} away yourself if it is meant to go."
         )
-    root = out_path.rstrip("/") + "/"
+    root = _real(fs, out_path).rstrip("/") + "/"
     for uri in inputs:
         bag_fs, bag_path = url_to_fs(uri)
-        if bag_fs.protocol == fs.protocol and bag_path.startswith(root):
+        if bag_fs.protocol == fs.protocol and _real(bag_fs, bag_path).startswith(root):
             raise DatasetWriteError(
                 f"{output} holds the bag {uri}, and --overwrite would remove it with the old dataset; "
                 "nothing was written. Fix: keep the bags outside the dataset's folder, or write to a new "
                 "--output."
             )
+
+
+def _real(fs: AbstractFileSystem, path: str) -> str:
+    """A local path with its links and ``..`` resolved (``../ds`` and a link to it name one folder); an
+    object store's key as it is."""
+    return os.path.realpath(path) if is_local(fs) else path
 
 
 def _a_dataset_or_empty(fs: AbstractFileSystem, path: str) -> bool:

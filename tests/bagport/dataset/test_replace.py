@@ -51,3 +51,19 @@ def test_overwrite_refuses_a_dataset_that_holds_a_bag_of_the_run(tmp_path: Path)
         refuse_existing(str(dataset), overwrite=True, inputs=[str(tmp_path / "elsewhere"), str(bag)])
     # a sibling whose name starts like the dataset's is not inside it
     refuse_existing(str(dataset), overwrite=True, inputs=[str(tmp_path / "ds-bags/ep0")])
+
+
+def test_overwrite_sees_a_bag_inside_the_dataset_through_dots_and_links(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    dataset = tmp_path / "ds"
+    (dataset / "meta").mkdir(parents=True)
+    (dataset / "meta/info.json").write_text("{}")
+    (dataset / "bags").mkdir()
+    (tmp_path / "sub").mkdir()
+    monkeypatch.chdir(tmp_path / "sub")
+    with pytest.raises(DatasetWriteError, match="holds the bag"):  # --output ../ds
+        refuse_existing("../ds", overwrite=True, inputs=[str(dataset / "bags/a.mcap")])
+    (tmp_path / "link").symlink_to(dataset / "bags")
+    with pytest.raises(DatasetWriteError, match="holds the bag"):  # the bag named through a link
+        refuse_existing(str(dataset), overwrite=True, inputs=[str(tmp_path / "link/a.mcap")])

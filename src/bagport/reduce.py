@@ -172,21 +172,24 @@ def start_reduce(
         video_files_size_in_mb=plan.config.video_files_size_in_mb,
     )
     record = run_record(plan, staged)
-    stamp_of = {f.bag_uri: source_stamp(f.bag_uri) for f in failures if not f.retryable}
+    # each excluded bag's source stamp (its files listed once), so an append or a scheduled ingestion does not
+    # retry an unchanged bad bag; a bag that failed for a reason not its own has none: the next run tries it
+    retry = {(f.bag_uri, f.segment) for f in failures if f.retryable}
+    left_out = [e for e in entries if e.episode_index is None]
+    stamp_of = {
+        e.qa.bag_uri: source_stamp(e.qa.bag_uri) for e in left_out if (e.qa.bag_uri, e.segment) not in retry
+    }
     if not plan.config.append:  # an append's record describes its own episodes only
         record["write_key"] = write_key(plan, stamped, failures)
         record["failures"] = [  # what an unchanged re-run needs to find it is up to date (bagport.run)
             {**failure_key(f), "source_stamp": stamp_of[f.bag_uri]} for f in failures if not f.retryable
         ]
-    # with their source stamp, so an append or a scheduled ingestion does not retry an unchanged bad bag;
-    # a bag that failed for a transient reason has none, so the next run tries it again
-    retry = {(f.bag_uri, f.segment) for f in failures if f.retryable}
     record["excluded"] = [
-        e.brief().to_json()
-        if (e.qa.bag_uri, e.segment) in retry
-        else replace(e.brief(), source_stamp=source_stamp(e.qa.bag_uri)).to_json()
-        for e in entries
-        if e.episode_index is None
+        replace(
+            e.brief(),
+            source_stamp=stamp_of.get(e.qa.bag_uri) if (e.qa.bag_uri, e.segment) not in retry else None,
+        ).to_json()
+        for e in left_out
     ]
     if not kept:  # an append whose new bags were all excluded: recorded, nothing written
         record_exclusions(plan.config.output, record)

@@ -181,9 +181,8 @@ def write_key(
                 episodes, key=lambda e: (e.manifest_entry, -1 if e.segment is None else e.segment)
             )
         ],
-        "failures": sorted(
-            [f.manifest_entry, f.bag_uri, -1 if f.segment is None else f.segment, f.episode_id, f.error]
-            for f in failures
+        "failures": sorted(  # as the run record keeps each (failure_key), in a stable order
+            (failure_key(f) for f in failures), key=lambda row: json.dumps(row, sort_keys=True)
         ),
     }
     text = json.dumps(facts, sort_keys=True, default=str, separators=(",", ":"))
@@ -236,12 +235,14 @@ def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
     if not settled:
         return plan
     failed: list[EpisodeFailure] = []
+    converted: list[PlannedEpisode] = []
     for request, episode in zip(plan.requests, unstaged, strict=True):
         found = settled.get((request.manifest_entry, request.episode_id))
         if found is not None and found.get("source_stamp") == episode.source_stamp:
             failed.append(EpisodeFailure.of(request, str(found["error"])))
-    gone = {(f.manifest_entry, f.bag_uri) for f in failed}
-    episodes = (*plan.reused, *(e for e in unstaged if (e.manifest_entry, e.bag_uri) not in gone))
+        else:
+            converted.append(episode)
+    episodes = (*plan.reused, *converted)
     if recorded != write_key(plan, episodes, failed):
         return plan
     return replace(plan, requests=(), reused=episodes, up_to_date=True, settled_failures=tuple(failed))

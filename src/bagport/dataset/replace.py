@@ -13,6 +13,7 @@ from pathlib import Path
 from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
+from bagport.dataset.layout import INFO_PATH
 from bagport.dataset.publish import building_beside, swap_into_place
 from bagport.dataset.remote import publish_remote
 from bagport.errors import DatasetWriteError
@@ -62,7 +63,7 @@ def _real(fs: AbstractFileSystem, path: str) -> str:
 def _a_dataset_or_empty(fs: AbstractFileSystem, path: str) -> bool:
     if fs.isfile(path):
         return False
-    return bool(fs.exists(f"{path.rstrip('/')}/meta/info.json")) or not fs.ls(path, detail=False)
+    return bool(fs.exists(f"{path.rstrip('/')}/{INFO_PATH}")) or not fs.ls(path, detail=False)
 
 
 def publish_built[Report](output: str, build: Callable[[Path], Report]) -> Report:

@@ -45,9 +45,17 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     # the temporary Prefect server (main() launched it before the parser's imports) boots while the imports
     # below run; main() kills it if the run ends without using it
     server = launch()
-    if not args.quiet and sys.stderr.isatty():  # something from the first second (start-up takes 5-13 s)
+    starting = (
+        not args.quiet and sys.stderr.isatty()
+    )  # something from the first second (start-up takes 5-13 s)
+    if starting:
         print("starting: planning ...", end="", file=sys.stderr, flush=True)  # the bar overwrites it
-    return _convert(args, throwaway_api=server is not None)
+    try:
+        return _convert(args, throwaway_api=server is not None)
+    except BaseException:
+        if starting:  # the error's paragraph starts its own line: the "starting" text erased, if still there
+            print("\r\x1b[K", end="", file=sys.stderr, flush=True)
+        raise
 
 
 def _option_errors(err: pydantic.ValidationError) -> str:

@@ -204,3 +204,15 @@ def test_an_append_whose_new_bags_all_failed_is_not_nothing_to_do() -> None:
     assert _summary_line(DatasetReport("ds", 2, 60, ("t",), (), 1, 2.0), True, 1.0).startswith(
         "nothing to do"
     )
+
+
+def test_an_error_before_the_bar_starts_on_a_line_of_its_own(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a terminal, "starting: planning ..." shows at once; a plan that fails erases it before the error
+    (it ran into the error's text: "starting: planning ...bagport convert: error: ...")."""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    argv = ["convert", "--manifest", str(tmp_path / "none.yaml"), "--contract", str(SAMPLE_CONTRACT)]
+    assert main([*argv, "--output", str(tmp_path / "ds")]) == 2
+    err = capfd.readouterr().err
+    assert err.startswith("starting: planning ...\r\x1b[Kbagport convert: error: ")

@@ -5,7 +5,8 @@ Real recordings are messier than the ones we write: a rosbag2 folder may be name
 ``metadata.yaml``, or with one whose storage id is empty or whose file list does not
 match the folder. The plan reads what is there: a consistent rosbag2 folder is handed
 to rosbags whole (it honours compression, counts and custom data); anything else is read
-as the data files present, merged in log-time order, with a warning saying why.
+as the data files present, merged in log-time order, with a warning saying why. One thing
+is refused: a ``metadata.yaml`` listing data files the folder lacks (an incomplete recording).
 """
 
 from __future__ import annotations
@@ -96,6 +97,23 @@ def _metadata_problem(metadata: dict[str, Any], present: list[BagPath], storage:
     return None
 
 
+def _refuse_missing_files(metadata: dict[str, Any], present: list[BagPath], uri: str) -> None:
+    """A recording whose ``metadata.yaml`` lists more data files than the folder holds, some of them absent,
+    is incomplete (a split file lost, or a copy not finished): converted, it would be a shorter episode that
+    looks whole. Fewer files is the test, so a folder whose files were renamed still reads (with a warning)."""
+    listed = [PurePath(str(x)).name for x in metadata.get("relative_file_paths") or []]
+    names = {p.name for p in present}
+    missing = [name for name in listed if name not in names]
+    if missing and len(present) < len(listed):
+        raise BagReadError(
+            f"metadata.yaml lists {len(listed)} data file(s) but the folder holds {len(present)}: {missing} "
+            "missing, so the recording is incomplete (a split file was lost, or the copy has not finished)",
+            uri=uri,
+            fix="copy the missing file(s) from the robot or its backup; to convert only the files present, "
+            "remove metadata.yaml from the folder (bagport then reads the data files it finds).",
+        )
+
+
 def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri: str) -> ReadPlan:
     """The paths to open for a bag at ``path`` whose content is ``storage``; ``scratch`` gives a folder for
     the links that rename a file (only asked for when one is needed)."""
@@ -106,6 +124,7 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
     present = _data_files(path)
     metadata = _metadata(path, uri)
     if metadata is not None:
+        _refuse_missing_files(metadata, present, uri)
         problem = _metadata_problem(metadata, present, storage)
         if problem is None:
             folder = _alias(path, "bag", scratch) if path.suffix == ".bag" else path

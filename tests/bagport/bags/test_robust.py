@@ -118,16 +118,29 @@ def test_metadata_with_empty_storage_id_reads_the_files_present_and_warns(tmp_pa
     assert re.search(r"storage id ''; reading the 5 mcap file\(s\) present instead", warnings[0])
 
 
-def test_metadata_listing_a_missing_file_reads_the_files_present_and_warns(tmp_path: Path) -> None:
+def test_metadata_listing_a_missing_file_is_an_incomplete_recording(tmp_path: Path) -> None:
+    """A split file lost (or not copied yet) is refused, not read as a shorter episode that looks whole."""
     folder = _copy_split(tmp_path)
-    expected = 0
-    with open_bag(str(realbag(SPLIT) / "wbag_4.mcap")) as last:
-        expected = 6074 - last.info.message_count
+    _edit_metadata(folder, relative_file_paths=SPLIT_FILES)
     (folder / "wbag_4.mcap").unlink()
+    with pytest.raises(BagReadError) as caught:
+        open_bag(str(folder)).close()
+    message = str(caught.value)
+    assert "lists 5 data file(s) but the folder holds 4: ['wbag_4.mcap'] missing" in message
+    assert "remove metadata.yaml" in message
+    (folder / "metadata.yaml").unlink()  # the documented way to convert what is there
     warnings, messages = _read_all(folder)
-    assert len(messages) == expected  # no short-read error: counts come from the files present
-    assert "metadata.yaml lists" in warnings[0]
-    assert "wbag_4.mcap" in warnings[0]
+    with open_bag(str(realbag(SPLIT) / "wbag_4.mcap")) as last:
+        assert len(messages) == 6074 - last.info.message_count
+    assert warnings == ()
+
+
+def test_metadata_naming_renamed_files_reads_them_and_warns(tmp_path: Path) -> None:
+    folder = _copy_split(tmp_path)
+    _edit_metadata(folder, relative_file_paths=[f"old_{i}.mcap" for i in range(5)])
+    warnings, messages = _read_all(folder)
+    assert len(messages) == 6074
+    assert "reading the 5 mcap file(s) present" in warnings[0]
 
 
 def test_metadata_missing_a_file_of_the_folder_reads_every_file_and_warns(tmp_path: Path) -> None:

@@ -24,13 +24,14 @@ EXCLUSIONS_STATE = "Completed with exclusions"
 
 @dataclass(frozen=True, slots=True)
 class RunCounts:
-    """Episodes of this run: written, of which reused from the staging store and warned by QA, and
-    excluded (QA, conversion, label)."""
+    """Episodes of this run: written, of which reused from the staging store, warned by QA and kept although
+    QA failed them (``--on-qa-fail keep``), and excluded (QA, conversion, label)."""
 
     converted: int
     warned: int
     excluded: int
     reused: int = 0
+    failed_kept: int = 0
 
     @classmethod
     def of(cls, report: DatasetReport) -> RunCounts:
@@ -40,12 +41,14 @@ class RunCounts:
             warned=sum(row.verdict == "warn" for row in kept),
             excluded=len(report.excluded),
             reused=len(report.reused),
+            failed_kept=sum(row.verdict == "fail" for row in kept),
         )
 
     def text(self) -> str:
         reused = f"{self.reused} reused from the staging store, " if self.reused else ""
+        failed = f", {self.failed_kept} kept although QA failed them" if self.failed_kept else ""
         return (
-            f"{self.converted} episode(s) converted ({reused}{self.warned} with QA warnings), "
+            f"{self.converted} episode(s) converted ({reused}{self.warned} with QA warnings{failed}), "
             f"{self.excluded} excluded"
         )
 

@@ -19,9 +19,10 @@ import simplejpeg
 from bagport.qa.config import Gate, ValuesQA
 from bagport.qa.result import CheckResult, judge
 
-__all__ = ["ValueMonitor"]
+__all__ = ["ValueMonitor", "image_grid"]
 
 _GRID_STEP = 8
+"""The image checks' pixel grid: one pixel in 8 each way (:func:`image_grid`)."""
 _TRACE_POINTS = 200
 _TRACE_DIMS = 8
 _THUMBNAILS = 8
@@ -98,6 +99,14 @@ def _same_as_previous(
     if previous is not None and previous.shape == last.shape:
         same[0] = bool((previous.reshape(-1) == block[0]).all())
     return same
+
+
+def image_grid(rgb: npt.NDArray[np.uint8]) -> npt.NDArray[np.uint8]:
+    """The pixels the image checks look at: one in :data:`_GRID_STEP` each way, closer on a frame under
+    64 px a side so the grid keeps at least 8 pixels a side (a 2x2 frame: every pixel; with a step of 8 it
+    was its first pixel alone, whose value decided "mean grey")."""
+    step = min(_GRID_STEP, max(1, min(rgb.shape[0], rgb.shape[1]) // _GRID_STEP))
+    return rgb[::step, ::step]
 
 
 class ValueMonitor:
@@ -185,7 +194,7 @@ class ValueMonitor:
         state = self._images.get(key)
         if state is None:
             state = self._images[key] = _ImageState()
-        grid = rgb[::_GRID_STEP, ::_GRID_STEP]
+        grid = image_grid(rgb)
         if not state.pending.fits(grid):
             self._check_images(state)
         state.pending.rows.append(grid.copy())

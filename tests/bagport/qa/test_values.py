@@ -52,7 +52,7 @@ class FrameByFrame(ValueMonitor):
 
     def add_image(self, k: int, key: str, rgb: npt.NDArray[np.uint8]) -> None:
         state = self._images.setdefault(key, values._ImageState())
-        grid = rgb[:: values._GRID_STEP, :: values._GRID_STEP]
+        grid = values.image_grid(rgb)
         mean = float(grid.mean())
         if mean < self._config.dark_threshold or mean > self._config.bright_threshold:
             state.dark_or_bright += 1
@@ -113,3 +113,21 @@ def test_batched_checks_are_the_frame_by_frame_ones(seed: int, frames: int) -> N
     assert json.dumps(batched.plots()) == json.dumps(oracle.plots())  # NaN in traces: by their text
     assert batched.frames == oracle.frames == frames
     assert batched.checks() == oracle.checks()  # asked twice: nothing pending is checked twice
+
+
+@pytest.mark.parametrize(
+    ("shape", "step"), [((480, 640, 3), 8), ((96, 128, 3), 8), ((40, 56, 3), 5), ((2, 2, 3), 1)]
+)
+def test_the_image_grid_keeps_at_least_8_pixels_a_side(shape: tuple[int, int, int], step: int) -> None:
+    rgb = np.arange(np.prod(shape), dtype=np.uint64).reshape(shape).astype(np.uint8)
+    assert np.array_equal(values.image_grid(rgb), rgb[::step, ::step])
+
+
+def test_a_tiny_mid_grey_frame_is_not_dark() -> None:
+    """A 2x2 frame [0, 128; 128, 255] has mean grey 127.75: it was judged by its first pixel (0), dark."""
+    monitor = ValueMonitor(ValuesQA(), fps=1, total_frames=3)
+    frame = np.repeat(np.array([[0, 128], [128, 255]], np.uint8)[:, :, None], 3, axis=2)
+    for k in range(3):
+        monitor.add_image(k, "observation.images.cam", frame)
+    dark = [c for c in monitor.checks() if c.check == "values.dark_or_bright_frames"]
+    assert [c.value for c in dark] == [0]

@@ -79,6 +79,10 @@ def damaged_bag(
     """The error for a bag whose ``action`` ("cannot be opened", "reading failed") raised ``err``;
     walks ``files`` to name the damaged record. ``last``: (topic, log_ns) of the last intact message."""
     damage = locate_damage(storage, list(files))
+    if (
+        damage is not None and damage.fix is not None
+    ):  # a file cut short: what happened, not the library's words
+        return BagReadError(f"{action}: {damage.describe()}", uri=uri, fix=damage.fix)
     what = f"{action} ({_one_line(err)})"
     if damage is not None:
         what += f"; damage found in {damage.describe()}"
@@ -98,7 +102,10 @@ def short_read(
     damage = locate_damage(storage, list(files))
     if damage is not None:
         return BagReadError(
-            f"{what}; damage found in {damage.describe()}", uri=uri, topic=topic, fix=_FIXES[storage]
+            f"{what}; damage found in {damage.describe()}",
+            uri=uri,
+            topic=topic,
+            fix=damage.fix or _FIXES[storage],
         )
     return BagReadError(
         what, uri=uri, topic=topic, fix=f"the bag is truncated or its index is stale: {_REINDEX_SHORT}"

@@ -26,6 +26,8 @@ from backports import zstd
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
+from bagport.bags.mcap_tail import FIX as CUT_FIX
+from bagport.bags.mcap_tail import mcap_cut
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 
@@ -55,6 +57,8 @@ class Damage:
     what: str
     topics: tuple[str, ...] = ()
     """Topics with messages in the damaged record, when known."""
+    fix: str | None = None
+    """What to do, when it is not the storage's usual fix (a file cut short is not a changed one)."""
 
     def describe(self) -> str:
         where = f"{self.file} at byte offset {self.offset}" if self.offset is not None else self.file
@@ -123,6 +127,9 @@ def _mcap_chunk_problem(raw: bytes, channels: dict[int, str]) -> str | None:
 
 
 def _locate_mcap(path: Path | RemotePath) -> Damage | None:
+    cut = mcap_cut(path)
+    if cut is not None:
+        return Damage(path.name, None, cut.describe(), fix=CUT_FIX)
     with path.open("rb") as handle:
         try:
             summary = make_reader(handle).get_summary()

@@ -1,0 +1,97 @@
+"""An MCAP file cut short: where its bytes end, and what of it is whole.
+
+A recorder killed mid-recording (or a copy that did not finish) leaves an MCAP file without its summary,
+footer and closing magic. rosbags then fails on the footer ("File end magic is invalid") and the
+summary cannot be read, which reads as damage; this says what happened instead, walking the records'
+headers (a seek per record: nothing is read into memory).
+"""
+
+from __future__ import annotations
+
+import struct
+from pathlib import Path
+from typing import IO
+
+from bagport.bags.remote import RemotePath
+
+__all__ = ["MAGIC", "McapCut", "mcap_cut"]
+
+MAGIC = b"\x89MCAP0\r\n"
+"""MCAP's magic, at the start and at the end of a whole file."""
+_RECORD_HEAD = struct.Struct("<BQ")
+_CHUNK, _DATA_END = 0x06, 0x0F
+
+
+class McapCut:
+    """Where a file that starts as MCAP but does not end as one stops."""
+
+    def __init__(self, name: str, size: int, record_at: int | None, chunks: int, data_whole: bool) -> None:
+        self.name = name
+        self.size = size
+        """The file's length in bytes."""
+        self.record_at = record_at
+        """The byte offset of the record the file ends inside (``None``: it ends between records)."""
+        self.chunks = chunks
+        """Whole chunks before the cut."""
+        self.data_whole = data_whole
+        """The data section's end record is there: only the summary and footer are missing."""
+
+    def describe(self) -> str:
+        """One clause: where the bytes end, and what is whole before."""
+        why = "it was cut short (the recorder stopped before writing its summary, or the copy is incomplete)"
+        if self.data_whole:
+            return (
+                f"the file ends at byte {self.size} without MCAP's summary and closing magic: {why}; its "
+                f"{self.chunks} chunk(s) of messages are whole"
+            )
+        where = (
+            f"inside the record that starts at byte {self.record_at}"
+            if self.record_at is not None
+            else "between records"
+        )
+        return (
+            f"the file ends at byte {self.size}, {where}, without MCAP's closing magic: {why}; the "
+            f"{self.chunks} chunk(s) before are whole"
+        )
+
+
+FIX = (
+    "if the recording is whole on the robot, copy it again; else keep its whole chunks with the mcap CLI "
+    "(`mcap recover FILE -o FIXED.mcap`) and convert FIXED.mcap."
+)
+"""What to do about a file cut short."""
+
+
+def mcap_cut(path: Path | RemotePath) -> McapCut | None:
+    """The cut of an MCAP file that does not end with its magic; ``None`` for a whole file, or one that
+    does not start as MCAP. A remote file is only checked at its two ends (a ranged read per record would
+    be a request each)."""
+    size = path.stat().st_size
+    with path.open("rb") as handle:
+        if handle.read(len(MAGIC)) != MAGIC:
+            return None
+        if size >= 2 * len(MAGIC):
+            handle.seek(size - len(MAGIC))
+            if handle.read(len(MAGIC)) == MAGIC:
+                return None
+        if isinstance(path, RemotePath):
+            return McapCut(path.name, size, None, 0, data_whole=False)
+        return _walk(handle, path.name, size)
+
+
+def _walk(handle: IO[bytes], name: str, size: int) -> McapCut:
+    """Record headers from the leading magic on, to the one the file ends inside."""
+    pos, chunks = len(MAGIC), 0
+    while pos < size:
+        head = handle.read(_RECORD_HEAD.size) if handle.seek(pos) == pos else b""
+        if len(head) < _RECORD_HEAD.size:
+            return McapCut(name, size, pos, chunks, data_whole=False)
+        opcode, length = _RECORD_HEAD.unpack(head)
+        if opcode == _DATA_END:
+            return McapCut(name, size, None, chunks, data_whole=True)
+        end = pos + _RECORD_HEAD.size + length
+        if end > size:
+            return McapCut(name, size, pos, chunks, data_whole=False)
+        chunks += opcode == _CHUNK
+        pos = end
+    return McapCut(name, size, None, chunks, data_whole=False)

@@ -105,6 +105,8 @@ class TolerantAnyReader(AnyReader):
         self.unloadable: dict[str, str] = {}
         self.placeholders: set[str] = set()
         """Types whose embedded definition is empty (completed from other sources)."""
+        self.embedded: frozenset[str] = frozenset()
+        """Types the bag's own definitions define (its connections' and the types they use)."""
         self._store_key = store_key
         """Whatever else the caller registers in the type store (it is shared between bags whose
         definitions and key are equal)."""
@@ -127,10 +129,11 @@ class TolerantAnyReader(AnyReader):
                 raise AnyReaderError("Bag contains no type definitions and no default type store was given.")
             typestore = get_typestore(Stores.EMPTY)
             typestore.register(self.default_typestore.fielddefs)
+            self.embedded = frozenset()  # every type is the default store's, none the bag's
         else:
             found = {(c.msgtype, c.msgdef.format, c.msgdef.data, c.digest) for c in defined}
             key = tuple(sorted(found, key=lambda d: (d[0], str(d[1]), d[2], d[3] or "")))
-            typestore, unloadable = _typestore(key, self.is2, self._store_key)
+            typestore, unloadable, self.embedded = _typestore(key, self.is2, self._store_key)
             self.unloadable.update(unloadable)
         self.connections = connections
         self.typestore = typestore
@@ -143,9 +146,10 @@ class TolerantAnyReader(AnyReader):
 @functools.lru_cache(maxsize=16)
 def _typestore(
     definitions: tuple[tuple[str, MessageDefinitionFormat, str, str | None], ...], is2: bool, _store_key: str
-) -> tuple[Any, dict[str, str]]:
-    """A type store of the embedded definitions (``(type, format, text, digest)``), and the types it
-    could not load with the reason. Kept per process: bags of one fleet embed the same definitions,
+) -> tuple[Any, dict[str, str], frozenset[str]]:
+    """A type store of the embedded definitions (``(type, format, text, digest)``), the types it
+    could not load with the reason, and the types the definitions define (the store, shared, is
+    completed from other sources later). Kept per process: bags of one fleet embed the same definitions,
     and the store keeps the deserialisers it generates (a tenth of a one-second episode's time)."""
     types: dict[str, Any] = {}
     digests: dict[str, str] = {}
@@ -172,4 +176,4 @@ def _typestore(
             continue
         if have != digest:
             unloadable[msgtype] = f"its definition hashes to {have}, the bag records {digest}"
-    return typestore, unloadable
+    return typestore, unloadable, frozenset(types)

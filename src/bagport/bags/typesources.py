@@ -230,7 +230,7 @@ def complete_bag_types(
     (reading it then fails with :func:`mismatch_error`, which names the placeholder)."""
     for msgtype in [t for t in reader.unloadable if t in extra]:
         del reader.unloadable[msgtype]
-    embedded = set(reader.typestore.fielddefs)
+    embedded = set(reader.embedded)  # not the store's types: a bag without definitions reads the bundled ones
     lacking = complete_typestore(reader.typestore, msgtypes, extra, bundled)
     empty: Typesdict = {t: ([], []) for t in reader.placeholders if lacking.get(t) == t}
     if empty:

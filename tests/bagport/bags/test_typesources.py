@@ -271,3 +271,30 @@ def test_prepare_reading_builds_what_a_first_bag_open_needs(tmp_path: Path) -> N
     """What the pool's forkserver does before forking its workers: rosbags' type stores imported (a
     fresh interpreter, so nothing else has imported them)."""
     assert python_output(_PREPARED_PROBE, tmp_path / "home") == ["False", "False", "True", "True"]
+
+
+@pytest.mark.parametrize("second_bag", [False, True])
+def test_a_bag_without_definitions_blames_the_bundled_one_not_the_bag(
+    tmp_path: Path, second_bag: bool
+) -> None:
+    """A Humble SQLite bag embeds no definitions: a message whose bytes do not fit is read with bagport's
+    bundled definition, and the error says so (also for a second bag in the same process, whose type store
+    is shared with an earlier bag's and completed from the bundled one)."""
+    from bagport.errors import DecodeError  # noqa: PLC0415 - this test's own
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    level = [(START_NS + k * PERIOD_NS, store.types["std_msgs/msg/Float64"](data=k * 1.5)) for k in range(3)]
+    bag = write_bag(tmp_path / "plain", "sqlite3", store, [("/level", "std_msgs/msg/Float64", level)])
+    db = next(bag.glob("*.db3"))
+    with sqlite3.connect(db) as con:
+        con.execute("DELETE FROM message_definitions")
+        con.execute("UPDATE messages SET data = substr(data, 1, 6) WHERE id = 2")  # cut short
+    if second_bag:
+        with open_bag(str(bag)) as first:
+            assert first.info.message_count == 3
+    with open_bag(str(bag)) as reader, pytest.raises(DecodeError) as caught:
+        for message in reader.messages():
+            message.msg()
+    text = str(caught.value)
+    assert "does not match bagport's bundled" in text
+    assert "embedded in the bag" not in text

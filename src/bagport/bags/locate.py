@@ -301,7 +301,10 @@ def _ros1_chunk(header: dict[str, bytes], data: bytes, conns: dict[int, str]) ->
     pos, topics = 0, set()
     while pos < len(inner):
         stream = _Slice(inner, pos)
-        record = _ros1_record(stream.read, len(inner) - pos)
+        try:
+            record = _ros1_record(stream.read, len(inner) - pos)
+        except (_BadRecordError, struct.error) as err:  # where in the chunk, as for MCAP
+            raise _BadRecordError(f"record at byte {pos} of the chunk is damaged: {_why(err)}") from err
         if record is None:
             break
         fields, payload = record

@@ -165,7 +165,12 @@ def test_ros1_record_layout_damage_names_the_record_offset(tmp_path: Path) -> No
     with pytest.raises(BagportError) as caught:
         _read_all(bag)
     text = _one_paragraph(caught.value)
-    assert re.search(r"ep\.bag at byte offset \d+: record damaged: ", text), text
+    found = re.search(
+        r"ep\.bag at byte offset (\d+): record damaged: record at byte (\d+) of the chunk is damaged", text
+    )
+    assert found is not None, text
+    chunk_at, inside = int(found.group(1)), int(found.group(2))
+    assert chunk_at < field and 0 < inside < field - chunk_at  # the chunk's offset, then the record's in it
 
 
 def test_ros1_damaged_message_payload_is_a_decode_error_with_topic_and_time(tmp_path: Path) -> None:

@@ -11,11 +11,30 @@ from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
-__all__ = ["detect_storage"]
+__all__ = ["MCAP_MAGIC", "detect_storage", "storage_by_content"]
 
 ROS1_MAGIC = b"#ROSBAG V2.0"
 MCAP_MAGIC = b"\x89MCAP0\r\n"
 SQLITE_MAGIC = b"SQLite format 3\x00"
+
+
+def _storage_of_head(head: bytes) -> Storage | None:
+    if head.startswith(ROS1_MAGIC):
+        return Storage.ROS1
+    if head.startswith(MCAP_MAGIC):
+        return Storage.MCAP
+    if head.startswith(SQLITE_MAGIC):
+        return Storage.SQLITE3
+    return None
+
+
+def storage_by_content(path: Path | RemotePath) -> Storage | None:
+    """The storage a file's first bytes say, whatever its name; ``None`` when they say none."""
+    try:
+        with path.open("rb") as handle:
+            return _storage_of_head(handle.read(16))
+    except OSError:
+        return None
 
 
 def _file_storage(path: Path | RemotePath, uri: str) -> Storage:
@@ -28,12 +47,9 @@ def _file_storage(path: Path | RemotePath, uri: str) -> Storage:
         raise BagReadError(
             "is an empty file, not a bag", uri=uri, fix="re-copy the bag; the file has no data."
         )
-    if head.startswith(ROS1_MAGIC):
-        return Storage.ROS1
-    if head.startswith(MCAP_MAGIC):
-        return Storage.MCAP
-    if head.startswith(SQLITE_MAGIC):
-        return Storage.SQLITE3
+    storage = _storage_of_head(head)
+    if storage is not None:
+        return storage
     if head.startswith(b"#ROSBAG"):
         raise BagReadError(
             f"is a ROS 1 bag of an unsupported version ({head[:13]!r})",
@@ -73,6 +89,14 @@ def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
     if not files and storage_id in (Storage.MCAP, Storage.SQLITE3):
         return Storage(storage_id)  # files compressed whole (.mcap.zstd): their content cannot tell
     if not files:
+        ros1 = sorted(p.name for p in path.iterdir() if p.suffix == ".bag" and p.is_file())
+        if ros1:
+            raise BagReadError(
+                f"is a folder of {len(ros1)} ROS 1 bag(s) ({', '.join(ros1[:5])}{', ...' if len(ros1) > 5 else ''}), "
+                "not one recording (a ROS 1 recording is one .bag file)",
+                uri=uri,
+                fix="list each .bag in the manifest, or convert them all with --glob 'FOLDER/*.bag'.",
+            )
         raise BagReadError(
             "is a folder without metadata.yaml, .mcap or .db3 files",
             uri=uri,

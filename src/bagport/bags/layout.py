@@ -19,6 +19,7 @@ from typing import Any
 
 import yaml
 
+from bagport.bags.detect import storage_by_content
 from bagport.bags.metadata_yaml import parse_metadata
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
@@ -136,25 +137,46 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
                 uri=uri,
                 fix="fix relative_file_paths and storage_identifier in metadata.yaml to match the folder.",
             )
-        usable = _usable(present, storage, uri)
-        warning = f"{problem}; reading the {len(usable)} {storage} file(s) present instead"
+        usable, renamed = _usable(present, storage, uri)
+        warning = f"{problem}; reading the {len(usable)} {storage} file(s) present instead{renamed.said}"
         return ReadPlan(
-            list(usable),
+            renamed.opened(usable, scratch),
             [*present, path / "metadata.yaml"],
             usable,
             [warning],
             message_compression=mode == "message",
         )
-    usable = _usable(present, storage, uri)
-    return ReadPlan(list(usable), list(present), usable)
+    usable, renamed = _usable(present, storage, uri)
+    return ReadPlan(renamed.opened(usable, scratch), list(present), usable, renamed.warnings())
 
 
-def _usable(present: list[BagPath], storage: Storage, uri: str) -> list[BagPath]:
-    usable = [p for p in present if p.suffix == SUFFIX[storage]]
+@dataclass(frozen=True, slots=True)
+class _Renamed:
+    """Data files whose name says another storage than their content (read by their content)."""
+
+    names: tuple[str, ...]
+    suffix: str
+
+    @property
+    def said(self) -> str:
+        return f" ({', '.join(self.names)} read as {self.suffix} by their content)" if self.names else ""
+
+    def warnings(self) -> list[str]:
+        return [f"data file(s) named for another storage{self.said}"] if self.names else []
+
+    def opened(self, usable: list[BagPath], scratch: Callable[[], Path]) -> list[Any]:
+        """What rosbags opens: each misnamed file behind a link with the right suffix (it goes by suffix)."""
+        return [_alias(p, f"{p.name}{self.suffix}", scratch) if p.name in self.names else p for p in usable]
+
+
+def _usable(present: list[BagPath], storage: Storage, uri: str) -> tuple[list[BagPath], _Renamed]:
+    """The data files of ``storage``: by their suffix, or by their content when the suffix says another."""
+    suffix = SUFFIX[storage]
+    usable = [p for p in present if p.suffix == suffix or storage_by_content(p) == storage]
     if not usable:
         raise BagReadError(
-            f"has no {SUFFIX[storage]} files (found {[p.name for p in present]})",
+            f"has no {suffix} files (found {[p.name for p in present]})",
             uri=uri,
             fix="point the manifest at a rosbag2 folder or at the bag file itself.",
         )
-    return usable
+    return usable, _Renamed(tuple(p.name for p in usable if p.suffix != suffix), suffix)

@@ -12,12 +12,10 @@ import struct
 from pathlib import Path
 from typing import IO
 
+from bagport.bags.detect import MCAP_MAGIC as MAGIC
 from bagport.bags.remote import RemotePath
 
 __all__ = ["MAGIC", "McapCut", "mcap_cut"]
-
-MAGIC = b"\x89MCAP0\r\n"
-"""MCAP's magic, at the start and at the end of a whole file."""
 _RECORD_HEAD = struct.Struct("<BQ")
 _CHUNK, _DATA_END = 0x06, 0x0F
 

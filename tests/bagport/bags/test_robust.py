@@ -377,3 +377,27 @@ def test_truncated_ros1_bag_says_to_reindex(tmp_path: Path) -> None:
     with pytest.raises(BagReadError, match=r"cut\.bag.*`rosbag reindex`"), open_bag(str(path)) as reader:
         list(reader.messages())
     assert [p.name for p in tmp_path.iterdir()] == ["cut.bag"]
+
+
+def test_a_data_file_named_for_another_storage_is_read_by_its_content(tmp_path: Path) -> None:
+    folder = _copy_split(tmp_path)
+    (folder / "wbag_2.mcap").rename(folder / "wbag_2.db3")
+    warnings, messages = _read_all(folder)
+    assert len(messages) == 6074
+    assert "wbag_2.db3 read as .mcap by their content" in warnings[0]
+    (folder / "metadata.yaml").unlink()  # without metadata.yaml too
+    warnings, messages = _read_all(folder)
+    assert len(messages) == 6074
+    assert warnings == ("data file(s) named for another storage (wbag_2.db3 read as .mcap by their content)",)
+
+
+def test_a_folder_of_ros1_bags_says_so_and_how_to_convert_them(tmp_path: Path) -> None:
+    folder = tmp_path / "ros1s"
+    folder.mkdir()
+    for name in ("a.bag", "b.bag"):
+        shutil.copyfile(realbag("rosbagjs_turtlesim/example.bag"), folder / name)
+    with pytest.raises(BagReadError) as caught:
+        open_bag(str(folder)).close()
+    message = str(caught.value)
+    assert "is a folder of 2 ROS 1 bag(s) (a.bag, b.bag), not one recording" in message
+    assert "--glob 'FOLDER/*.bag'" in message

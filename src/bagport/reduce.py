@@ -73,6 +73,11 @@ def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str
         "manifest": {
             "uri": plan.config.manifest or plan.config.bags_glob,
             "bags": [b.uri for b in plan.manifest.bags],
+            # each windowed entry's window (start_s/end_s...), by manifest entry: an append knows which
+            # windows of a bag the dataset holds (bagport.dataset.history.dataset_bags)
+            "windows": {
+                str(b.entry): b.window.key() for b in plan.manifest.bags if not b.window.is_whole_bag
+            },
             "converted_now": [r.bag_uri for r in plan.requests],
             "reused": reused,
         },

@@ -15,12 +15,13 @@ from typing import Any
 from fsspec.core import url_to_fs
 
 from bagport import __version__
+from bagport.append_plan import bags_to_append
 from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetReport
 from bagport.dataset.base import read_base
-from bagport.dataset.history import converted_bags, recorded_failures, recorded_write_key
+from bagport.dataset.history import dataset_bags, recorded_failures, recorded_write_key
 from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
 from bagport.dataset.replace import refuse_existing
@@ -87,7 +88,6 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     staging_fs, staging_path = url_to_fs(staging)
     require_bucket(staging_fs, staging_path, staging)
     repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to
-    done: set[tuple[str, str]] = set()
     stamps: dict[str, str] = {}
 
     def stamp_of(uri: str) -> str:  # each bag's files are listed at most once per plan
@@ -95,13 +95,14 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             stamps[uri] = source_stamp(uri)
         return stamps[uri]
 
+    msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
+    bags = manifest.bags
     if config.append and fs.exists(out_path):
-        done = converted_bags(config.output)
+        bags = bags_to_append(bags, dataset_bags(config.output), stamp_of, msg_definitions)
         _refuse_incompatible_append(config, contract)
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
     check_format_outputs(config)
-    msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(bag.uri, contract_text, encoder, bag.window.key(), msg_definitions),
@@ -117,8 +118,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             window=bag.window,
             msg_definitions=msg_definitions,
         )
-        for bag in manifest.bags
-        if not done or (bag.uri, stamp_of(bag.uri)) not in done
+        for bag in bags
     )
     plan = RunPlan(config, contract, manifest, requests, contract_text, qa)
     return _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass, field
 from typing import Any
 
 import pandas as pd
@@ -19,24 +20,57 @@ from bagport.dataset.layout import (
 )
 from bagport.dataset.write import DatasetReport
 
-__all__ = ["converted_bags", "dataset_report", "record_exclusions", "recorded_failures", "recorded_write_key"]
+__all__ = [
+    "DatasetBags",
+    "dataset_bags",
+    "dataset_report",
+    "record_exclusions",
+    "recorded_failures",
+    "recorded_write_key",
+]
 
 
-def converted_bags(root: str) -> set[tuple[str, str]]:
-    """``(bag URI, source stamp)`` of every episode in the dataset at ``root``.
+@dataclass(frozen=True, slots=True)
+class DatasetBags:
+    """What a dataset's run records say of its bags, each by URI and manifest window (the window's key;
+    ``None`` in a record written before windows were recorded: any window of the bag)."""
 
-    Bags a run excluded (failed QA or conversion) are in the set too, so an unchanged bad bag is not
-    retried by every scheduled run; a bag re-recorded or changed since (another stamp) converts again, as
-    does one whose failure was not its own (recorded without a stamp: a transient I/O error).
-    """
+    kept: dict[tuple[str, str | None], dict[str, str]] = field(default_factory=dict)
+    """Bags with an episode in the dataset: ``{(URI, window): {source stamp: bag fingerprint}}``."""
+    left_out: set[tuple[str, str | None, str]] = field(default_factory=set)
+    """Bags a run excluded (failed QA or conversion), with the stamp of the files then."""
+
+    def kept_as(self, uri: str, window: str) -> dict[str, str] | None:
+        """The stamps and fingerprints the bag's window was appended with, or ``None`` when it was not."""
+        found = [self.kept[k] for k in ((uri, window), (uri, None)) if k in self.kept]
+        return {stamp: fp for stamps in found for stamp, fp in stamps.items()} if found else None
+
+    def left_out_unchanged(self, uri: str, window: str, stamp: str) -> bool:
+        """The bag's window was left out by a run when its files had this stamp (it would fail again)."""
+        return (uri, window, stamp) in self.left_out or (uri, None, stamp) in self.left_out
+
+
+def dataset_bags(root: str) -> DatasetBags:
+    """The bags of every run record of the dataset at ``root``: kept (an episode in the dataset) or left
+    out. A bag left out converts again once its files change (another stamp), or when its failure was not
+    its own (recorded without a stamp: a transient I/O error)."""
     fs, path = url_to_fs(root)
-    found: set[tuple[str, str]] = set()
+    bags = DatasetBags()
     for record_path in fs.glob(f"{path.rstrip('/')}/meta/provenance/run*.json"):
         with fs.open(record_path, "r", encoding="utf-8") as handle:
             record = json.load(handle)
-        for episode in [*record.get("episodes", []), *record.get("excluded", [])]:
-            found.add((str(episode["bag_uri"]), str(episode.get("source_stamp", ""))))
-    return found
+        windows = record.get("manifest", {}).get("windows")  # by manifest entry; absent in older records
+
+        def window_of(entry: dict[str, Any], windows: dict[str, str] | None = windows) -> str | None:
+            return None if windows is None else windows.get(str(entry.get("manifest_entry")), "")
+
+        for episode in record.get("episodes", []):
+            stamps = bags.kept.setdefault((str(episode["bag_uri"]), window_of(episode)), {})
+            stamps[str(episode.get("source_stamp", ""))] = str(episode.get("bag_fingerprint", ""))
+        for excluded in record.get("excluded", []):
+            key = (str(excluded["bag_uri"]), window_of(excluded), str(excluded.get("source_stamp", "")))
+            bags.left_out.add(key)
+    return bags
 
 
 def dataset_report(root: str) -> DatasetReport:
@@ -62,7 +96,7 @@ def dataset_report(root: str) -> DatasetReport:
 def record_exclusions(root: str, run_record: dict[str, Any]) -> str:
     """Record an append run that kept no episode (its bags were all excluded) as the next
     ``run-NNN.json``, data untouched; the URI of the record. Its ``excluded`` entries keep an
-    unchanged bad bag from being retried by every scheduled run (see :func:`converted_bags`)."""
+    unchanged bad bag from being retried by every scheduled run (see :func:`dataset_bags`)."""
     fs, path = url_to_fs(root)
     run = read_base(root).run_number
     record_path = f"{path.rstrip('/')}/{APPEND_RUN_RECORD_PATH.format(run=run)}"

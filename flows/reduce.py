@@ -90,6 +90,7 @@ def reduce_dataset(
             overwrite=config.overwrite,
             append=config.append,
             repaired=True,  # by plan_run, at the start of this run: recovery runs once per run
+            expect_episodes=plan.dataset_episodes,  # another append since this plan: refused
         ) as session:
             get_run_logger().info("writing %d output file(s)", len(session.plan.files))
             with _file_writers(config.resolved_workers()) as threads:

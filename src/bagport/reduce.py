@@ -242,6 +242,7 @@ def reduce_run(
             qa=start.entries,
             qa_config=plan.qa.model_dump(mode="json"),
             append=plan.config.append,
+            expect_episodes=plan.dataset_episodes,
         )
         if "lerobot" in plan.config.formats
         else None

@@ -67,6 +67,9 @@ class RunPlan:
     settled_failures: tuple[EpisodeFailure, ...] = ()
     """In an up-to-date plan: the bags that failed to convert in the run that wrote the dataset, unchanged
     since (the same source stamp), so they would fail the same way: not tried again."""
+    dataset_episodes: int | None = None
+    """An append's: the episodes the dataset held when the plan chose the bags it does not hold yet (0: no
+    dataset yet). The write is refused if another run changed that number since."""
 
 
 def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
@@ -97,9 +100,10 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
 
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     bags = manifest.bags
+    dataset_episodes = 0 if config.append else None
     if config.append and fs.exists(out_path):
+        dataset_episodes = _refuse_incompatible_append(config, contract)
         bags = bags_to_append(bags, dataset_bags(config.output), stamp_of, msg_definitions)
-        _refuse_incompatible_append(config, contract)
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
     check_format_outputs(config)
@@ -120,7 +124,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         )
         for bag in bags
     )
-    plan = RunPlan(config, contract, manifest, requests, contract_text, qa)
+    plan = RunPlan(config, contract, manifest, requests, contract_text, qa, dataset_episodes=dataset_episodes)
     return _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
 
 
@@ -253,15 +257,15 @@ def up_to_date(report: DatasetReport) -> bool:
     return not report.converted and bool(report.reused) and not report.qa
 
 
-def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -> None:
+def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -> int:
     """Before anything converts: an append whose contract gives other features (or fps, or robot type) than the
-    dataset's ``meta/info.json`` would be refused after converting every bag."""
+    dataset's ``meta/info.json`` would be refused after converting every bag. The dataset's episodes."""
     info = read_base(config.output).info
     have = sorted(set(info["features"]) - set(DEFAULT_FEATURES))
     want = sorted(f.key for f in contract.features)
     robot_type = info.get("robot_type")
     if have == want and info["fps"] == contract.fps and robot_type in (None, contract.robot_type):
-        return
+        return int(info["total_episodes"])
     differences = (
         [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
     )

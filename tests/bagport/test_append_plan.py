@@ -8,8 +8,11 @@ import os
 import shutil
 from pathlib import Path
 
+import pytest
+
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
+from bagport.errors import DatasetWriteError
 from bagport.reduce import reduce_run
 from bagport.run import plan_run, stage_all
 from bagport.synth import EpisodeSpec, write_episode_bag
@@ -19,7 +22,7 @@ SPEC = EpisodeSpec(duration_s=1.5, cameras=SMALL_CAMERAS)
 
 
 def _append(manifest: Path, out: Path) -> list[str]:
-    """Append the manifest's new bags to ``out``; the URIs of the bags the plan converted."""
+    """Append the manifest's new bags to ``out``; the URIs of the bags the plan adds."""
     config = ConvertConfig(
         manifest=str(manifest),
         contract=str(SAMPLE_CONTRACT),
@@ -28,10 +31,10 @@ def _append(manifest: Path, out: Path) -> list[str]:
         append=True,
     )
     plan = plan_run(config)
-    converted = [r.bag_uri for r in plan.requests]
-    if converted:
+    added = [r.bag_uri for r in plan.requests] + [e.bag_uri for e in plan.reused]  # reused: staged already
+    if added:
         reduce_run(plan, stage_all(plan))
-    return converted
+    return added
 
 
 def _episodes(out: Path) -> int:
@@ -84,3 +87,37 @@ def test_a_bag_written_another_way_is_the_same_bag(tmp_path: Path) -> None:
         manifest.write_text(f"bags:\n  - uri: '{written}'\n")
         assert _append(manifest, out) == [], written
     assert _episodes(out) == 1
+
+
+def test_an_append_planned_before_another_run_appended_is_refused_and_its_rerun_adds_only_what_is_new(
+    tmp_path: Path,
+) -> None:
+    """Two appends of the same new bag, overlapping (a manual run beside the hourly ingestion): the one
+    that writes second was planned when the bag was new; it is refused, nothing written, and run again it
+    finds nothing new."""
+    bags = tmp_path / "bags"
+    write_episode_bag(bags / "old", "mcap", SPEC)
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {bags / 'old'}\n")
+    out = tmp_path / "ds"
+    _append(manifest, out)
+    write_episode_bag(bags / "new", "mcap", SPEC)
+    manifest.write_text(f"bags:\n  - uri: {bags / 'old'}\n  - uri: {bags / 'new'}\n")
+    config = ConvertConfig(
+        manifest=str(manifest),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(out),
+        staging=str(tmp_path / "late.staging"),  # each run its own staging store, as two machines would
+        encoder=FAST_CODEC,
+        append=True,
+    )
+    late = plan_run(config)
+    assert late.dataset_episodes == 1
+    staged = stage_all(late)
+    assert _append(manifest, out) == [str(bags / "new")]  # the other run appends it first
+    with pytest.raises(
+        DatasetWriteError, match=r"changed since this run was planned \(it held 1 episode\(s\), now 2\)"
+    ):
+        reduce_run(late, staged)
+    assert _episodes(out) == 2
+    assert _append(manifest, out) == []

@@ -123,10 +123,13 @@ def open_write(
     overwrite: bool = False,
     append: bool = False,
     repaired: bool = False,
+    expect_episodes: int | None = None,
 ) -> Iterator[WriteSession]:
     """Repair ``output`` (unless the caller did already in this run: ``repaired``), plan the files, and
     hold a build location while the block runs; whatever the block did not commit is removed when it
-    ends (see the module docstring)."""
+    ends (see the module docstring). ``expect_episodes``: the episodes an append found in the dataset when
+    it decided which bags were new; another number means another run wrote to it since, and the write is
+    refused (the commit refuses one that happens later)."""
     fs, out_path = url_to_fs(output)
     if not repaired:
         repair_dataset(output)  # once per write: the commit does not repair again
@@ -136,6 +139,13 @@ def open_write(
     base = read_base(output) if appending else None
     if base is None:
         refuse_existing(output, overwrite=overwrite)
+    if expect_episodes is not None and (base.episodes if base is not None else 0) != expect_episodes:
+        raise DatasetWriteError(
+            f"{output} changed since this run was planned (it held {expect_episodes} episode(s), now "
+            f"{base.episodes if base is not None else 0}): another run wrote to it meanwhile, and may have "
+            "appended this run's bags already; nothing was written. Fix: run the append again (it adds only what "
+            "is still new, reusing the staged episodes); one run at a time per output."
+        )
     plan = _plan(summaries, features, limits or DatasetLimits(), base)
     mode: Literal["publish", "append"] = "append" if appending else "publish"
     if is_local(fs):

@@ -32,6 +32,7 @@ def write_dataset(
     qa: Sequence[QAEntry] = (),
     qa_config: dict[str, Any] | None = None,
     append: bool = False,
+    expect_episodes: int | None = None,
 ) -> DatasetReport:
     """Write the dataset at ``output`` (the dataset root).
 
@@ -40,9 +41,11 @@ def write_dataset(
     (:mod:`bagport.dataset.publish`); on an object store its files are uploaded under an intent record
     and committed (:mod:`bagport.dataset.remote`). With ``append``, the episodes are added to the
     dataset at ``output`` (created if missing) as new files: old data and video files never change,
-    and are never read.
+    and are never read. ``expect_episodes``: see :func:`~bagport.dataset.session.open_write`.
     """
-    with open_write(summaries, output, limits=limits, overwrite=overwrite, append=append) as session:
+    with open_write(
+        summaries, output, limits=limits, overwrite=overwrite, append=append, expect_episodes=expect_episodes
+    ) as session:
         written = [write_planned_file(session.plan, item, session.build) for item in session.plan.files]
         return commit_write(
             session,

@@ -52,8 +52,9 @@ def _add_convert(sub: Subparsers, handler: Handler) -> None:
         "dataset is being written); Prefect's console "
         "lines are off unless --verbose, so each failure prints once (they still reach the Prefect API). The "
         "last line counts this run's episodes (converted, reused from the staging store, with QA warnings, "
-        "kept although QA failed them with --on-qa-fail keep, excluded) and what the dataset holds. An --append whose contract gives other features, fps or robot "
-        "type than the dataset's meta/info.json is refused before anything converts.",
+        "kept although QA failed them with --on-qa-fail keep, excluded) and what the dataset holds. An "
+        "--append whose contract or codec gives other features, fps, robot type or camera encoder settings "
+        "than the dataset's meta/info.json is refused before anything converts.",
     )
     convert.add_argument(
         "--config",

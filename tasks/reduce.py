@@ -20,9 +20,12 @@ __all__ = ["failed_with", "log_report", "reduce_task", "write_file_task"]
 
 
 def failed_with(err: BagportError) -> State[Any]:
-    """The Failed state carrying bagport's error (logged): its type decides the CLI's exit code."""
+    """The Failed state carrying bagport's error (logged): its type decides the CLI's exit code. Without
+    its traceback: the state outlives the run, and the traceback's frames would keep what the reduce held
+    (the stats' sketches) alive to the interpreter's exit, where their library printed ~600 lines of
+    "leaked instances" under the one-paragraph error."""
     get_run_logger().error("%s", err)
-    return Failed(message=str(err), data=err)
+    return Failed(message=str(err), data=err.with_traceback(None))
 
 
 def log_report(report: DatasetReport) -> None:

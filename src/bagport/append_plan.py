@@ -11,14 +11,58 @@ appended twice. A bag a run left out (failed QA or conversion) converts again on
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from typing import Any
 
 from bagport.bags import open_bag
+from bagport.config import ConvertConfig
+from bagport.contract import ContractPlan, FeatureKind
+from bagport.dataset.base import read_base
 from bagport.dataset.history import DatasetBags
+from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.episode.checks import bag_fingerprint
-from bagport.errors import BagportError
+from bagport.errors import BagportError, DatasetWriteError
 from bagport.manifest import BagEntry
+from bagport.video import EncoderSettings
 
-__all__ = ["bags_to_append"]
+__all__ = ["bags_to_append", "check_append_fits"]
+
+
+def check_append_fits(config: ConvertConfig, contract: ContractPlan) -> int:
+    """Before anything converts, an append whose contract or encoder would give other features than the
+    dataset's ``meta/info.json`` is refused (the commit would refuse it after converting every bag): other
+    keys, fps or robot type, or a camera the dataset encoded with other settings (the same keys the commit
+    compares). A vector's shape and names are known from the bags only: the commit checks them. The
+    dataset's episodes."""
+    info = read_base(config.output).info
+    differences = _differences(info, contract, EncoderSettings.from_dict(config.encoder))
+    if not differences:
+        return int(info["total_episodes"])
+    raise DatasetWriteError(
+        f"cannot append to {config.output} with {config.contract}: the contract or codec does not match the "
+        f"dataset ({'; '.join(differences)}); nothing was converted. Fix: append with the contract and codec "
+        "the dataset was made with, or convert into a new --output."
+    )
+
+
+def _differences(info: dict[str, Any], contract: ContractPlan, encoder: EncoderSettings) -> list[str]:
+    have, features = sorted(set(info["features"]) - set(DEFAULT_FEATURES)), info["features"]
+    want = sorted(f.key for f in contract.features)
+    found = [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
+    robot_type = info.get("robot_type")
+    if robot_type not in (None, contract.robot_type):  # info.json has one: it would relabel every episode
+        found.append(f"robot_type: dataset {robot_type!r}, contract {contract.robot_type!r}")
+    if only_dataset := [k for k in have if k not in want]:
+        found.append(f"only in the dataset: {', '.join(only_dataset)}")
+    if only_contract := [k for k in want if k not in have]:
+        found.append(f"only in the contract: {', '.join(only_contract)}")
+    for feature in (f for f in contract.features if f.key in features):
+        video = features[feature.key].get("info") or {}
+        if feature.kind is FeatureKind.VIDEO and not video.get("is_depth_map"):
+            asked = {**encoder.to_info(), "video.pix_fmt": encoder.pix_fmt}
+            if changed := sorted(k for k, v in asked.items() if k in video and video[k] != v):
+                were = ", ".join(f"{k} {video[k]!r} -> {asked[k]!r}" for k in changed)
+                found.append(f"{feature.key} encoder: {were}")
+    return found
 
 
 def bags_to_append(

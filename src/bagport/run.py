@@ -15,19 +15,16 @@ from typing import Any
 from fsspec.core import url_to_fs
 
 from bagport import __version__
-from bagport.append_plan import bags_to_append
+from bagport.append_plan import bags_to_append, check_append_fits
 from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, parse_contract
 from bagport.dataset import DatasetReport
-from bagport.dataset.base import read_base
 from bagport.dataset.history import dataset_bags, recorded_failures, recorded_write_key
-from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.dataset.repair import repair_dataset
 from bagport.dataset.replace import refuse_existing
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
-from bagport.errors import DatasetWriteError
 from bagport.formats import check_format_outputs
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
@@ -102,7 +99,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     bags = manifest.bags
     dataset_episodes = 0 if config.append else None
     if config.append and fs.exists(out_path):
-        dataset_episodes = _refuse_incompatible_append(config, contract)
+        dataset_episodes = check_append_fits(config, contract)
         bags = bags_to_append(bags, dataset_bags(config.output), stamp_of, msg_definitions)
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
@@ -255,31 +252,6 @@ def _mark_up_to_date(plan: RunPlan, stamp_of: Callable[[str], str]) -> RunPlan:
 def up_to_date(report: DatasetReport) -> bool:
     """Whether the report is of a run that wrote nothing: every episode reused, no QA row written."""
     return not report.converted and bool(report.reused) and not report.qa
-
-
-def _refuse_incompatible_append(config: ConvertConfig, contract: ContractPlan) -> int:
-    """Before anything converts: an append whose contract gives other features (or fps, or robot type) than the
-    dataset's ``meta/info.json`` would be refused after converting every bag. The dataset's episodes."""
-    info = read_base(config.output).info
-    have = sorted(set(info["features"]) - set(DEFAULT_FEATURES))
-    want = sorted(f.key for f in contract.features)
-    robot_type = info.get("robot_type")
-    if have == want and info["fps"] == contract.fps and robot_type in (None, contract.robot_type):
-        return int(info["total_episodes"])
-    differences = (
-        [f"fps: dataset {info['fps']}, contract {contract.fps}"] if info["fps"] != contract.fps else []
-    )
-    if robot_type not in (None, contract.robot_type):  # info.json has one: it would relabel every episode
-        differences.append(f"robot_type: dataset {robot_type!r}, contract {contract.robot_type!r}")
-    if only_dataset := [k for k in have if k not in want]:
-        differences.append(f"only in the dataset: {', '.join(only_dataset)}")
-    if only_contract := [k for k in want if k not in have]:
-        differences.append(f"only in the contract: {', '.join(only_contract)}")
-    raise DatasetWriteError(
-        f"cannot append to {config.output} with {config.contract}: the contract does not match the dataset "
-        f"({'; '.join(differences)}); nothing was converted. Fix: append with the contract the dataset was "
-        "made with, or convert into a new --output."
-    )
 
 
 def segment_all(plan: RunPlan) -> tuple[tuple[EpisodeRequest, ...], tuple[str, ...]]:

@@ -216,3 +216,27 @@ def test_an_error_before_the_bar_starts_on_a_line_of_its_own(
     assert main([*argv, "--output", str(tmp_path / "ds")]) == 2
     err = capfd.readouterr().err
     assert err.startswith("starting: planning ...\r\x1b[Kbagport convert: error: ")
+
+
+def test_an_append_the_commit_refuses_is_one_paragraph_without_leak_reports(tmp_path: Path) -> None:
+    """A vector's other shape is known from the bags only, so the commit refuses the append; its error
+    travelled with its traceback, whose frames kept the stats' sketches alive to the process's exit, where
+    their library printed ~600 lines of "nanobind: leaked ..." under the error."""
+    write_episode_bag(tmp_path / "a", "mcap", EpisodeSpec(duration_s=0.5))
+    write_episode_bag(tmp_path / "b", "mcap", EpisodeSpec(duration_s=0.5, seed=3))
+    manifest = tmp_path / "m.yaml"
+    out = tmp_path / "out"
+    three = tmp_path / "three_joints.yaml"
+    names = "[position.j1, position.j2, position.j3, position.j4, position.j5, position.j6]"
+    three.write_text(SAMPLE_CONTRACT.read_text().replace(names, "[position.j1, position.j2, position.j3]"))
+    for bags, contract in (("a", SAMPLE_CONTRACT), ("b", three)):
+        manifest.write_text(f"bags:\n  - uri: {bags}\n")
+        proc = subprocess.run(
+            [sys.executable, "-m", "flows.cli", *_convert(manifest, contract, out), "--append", "--quiet",
+             "--runner", "thread", "--codec", "h264-fast"],
+            capture_output=True, text=True, check=False, cwd=REPO,
+        )  # fmt: skip
+    assert proc.returncode == 2, proc.stderr
+    assert "the new episodes' features differ from the dataset's (action, observation.state" in proc.stderr
+    assert "nanobind" not in proc.stderr
+    assert len(proc.stderr.splitlines()) <= 2, proc.stderr

@@ -37,6 +37,17 @@ def _append(manifest: Path, out: Path) -> list[str]:
     return added
 
 
+def _appended_once(tmp_path: Path) -> tuple[Path, Path, Path]:
+    """One bag appended to a new dataset: the bag, its manifest and the dataset."""
+    bag = tmp_path / "bags" / "ep"
+    write_episode_bag(bag, "mcap", SPEC)
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {bag}\n")
+    out = tmp_path / "ds"
+    assert _append(manifest, out) == [str(bag)]
+    return bag, manifest, out
+
+
 def _episodes(out: Path) -> int:
     return validate_dataset(out, repo_id="test/append", decode_every=30).episodes
 
@@ -60,12 +71,7 @@ def test_another_window_of_a_bag_in_the_dataset_is_appended(tmp_path: Path) -> N
 def test_a_bag_copied_again_is_not_appended_twice_but_another_recording_under_its_name_is(
     tmp_path: Path,
 ) -> None:
-    bag = tmp_path / "bags" / "ep"
-    write_episode_bag(bag, "mcap", SPEC)
-    manifest = tmp_path / "m.yaml"
-    manifest.write_text(f"bags:\n  - uri: {bag}\n")
-    out = tmp_path / "ds"
-    assert _append(manifest, out) == [str(bag)]
+    bag, manifest, out = _appended_once(tmp_path)
     for file in bag.iterdir():  # copied again without keeping times (cp, rsync without -t, a restore)
         os.utime(file, (1_800_000_000, 1_800_000_000))
     assert _append(manifest, out) == []
@@ -77,12 +83,7 @@ def test_a_bag_copied_again_is_not_appended_twice_but_another_recording_under_it
 
 
 def test_a_bag_written_another_way_is_the_same_bag(tmp_path: Path) -> None:
-    bag = tmp_path / "bags" / "ep"
-    write_episode_bag(bag, "mcap", SPEC)
-    manifest = tmp_path / "m.yaml"
-    manifest.write_text(f"bags:\n  - uri: {bag}\n")
-    out = tmp_path / "ds"
-    assert _append(manifest, out) == [str(bag)]
+    bag, manifest, out = _appended_once(tmp_path)
     for written in (f"file://{bag}", f"{bag}/", f"{bag.parent}/./ep", f"{bag.parent}/../bags/ep"):
         manifest.write_text(f"bags:\n  - uri: '{written}'\n")
         assert _append(manifest, out) == [], written

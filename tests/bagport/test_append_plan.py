@@ -122,3 +122,22 @@ def test_an_append_planned_before_another_run_appended_is_refused_and_its_rerun_
         reduce_run(late, staged)
     assert _episodes(out) == 2
     assert _append(manifest, out) == []
+
+
+def test_an_append_with_other_encoder_settings_is_refused_before_anything_converts(tmp_path: Path) -> None:
+    bag, manifest, out = _appended_once(tmp_path)
+    write_episode_bag(bag.parent / "new", "mcap", SPEC)
+    manifest.write_text(f"bags:\n  - uri: {bag}\n  - uri: {bag.parent / 'new'}\n")
+    config = ConvertConfig(
+        manifest=str(manifest),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(out),
+        encoder={**FAST_CODEC, "crf": 28},
+        append=True,
+    )
+    with pytest.raises(
+        DatasetWriteError,
+        match=r"observation\.images\.\w+ encoder: video\.crf 18 -> 28.*nothing was converted",
+    ):
+        plan_run(config)
+    assert not (out.parent / "ds.staging").exists()  # nothing converted

@@ -27,14 +27,14 @@ from bagport.video import EncoderSettings
 __all__ = ["bags_to_append", "check_append_fits"]
 
 
-def check_append_fits(config: ConvertConfig, contract: ContractPlan) -> int:
-    """Before anything converts, an append whose contract or encoder would give other features than the
-    dataset's ``meta/info.json`` is refused (the commit would refuse it after converting every bag): other
-    keys, fps or robot type, or a camera the dataset encoded with other settings (the same keys the commit
-    compares). A vector's shape and names are known from the bags only: the commit checks them. The
-    dataset's episodes."""
+def check_append_fits(config: ConvertConfig, contract: ContractPlan, *, adding: bool) -> int:
+    """Before anything converts, an append ``adding`` bags whose contract or encoder would give other
+    features than the dataset's ``meta/info.json`` is refused (the commit would refuse it after converting
+    every bag): other keys, fps or robot type, or a camera the dataset encoded with other settings (the
+    same keys the commit compares). A vector's shape and names are known from the bags only: the commit
+    checks them. An append with nothing new writes nothing, and is not refused. The dataset's episodes."""
     info = read_base(config.output).info
-    differences = _differences(info, contract, EncoderSettings.from_dict(config.encoder))
+    differences = _differences(info, contract, EncoderSettings.from_dict(config.encoder)) if adding else []
     if not differences:
         return int(info["total_episodes"])
     raise DatasetWriteError(

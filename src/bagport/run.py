@@ -99,8 +99,8 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     bags = manifest.bags
     dataset_episodes = 0 if config.append else None
     if config.append and fs.exists(out_path):
-        dataset_episodes = check_append_fits(config, contract)
         bags = bags_to_append(bags, dataset_bags(config.output), stamp_of, msg_definitions)
+        dataset_episodes = check_append_fits(config, contract, adding=bool(bags))
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
     check_format_outputs(config)

@@ -45,9 +45,8 @@ def _cmd_convert(args: argparse.Namespace) -> int:
     # the temporary Prefect server (main() launched it before the parser's imports) boots while the imports
     # below run; main() kills it if the run ends without using it
     server = launch()
-    starting = (
-        not args.quiet and sys.stderr.isatty()
-    )  # something from the first second (start-up takes 5-13 s)
+    # something from the first second (start-up takes 5-13 s)
+    starting = not args.quiet and sys.stderr.isatty()
     if starting:
         print("starting: planning ...", end="", file=sys.stderr, flush=True)  # the bar overwrites it
     try:

@@ -94,12 +94,11 @@ def _absolute(uri: str, base_dir: str) -> str:
     """``uri`` relative to the manifest's folder (a local path or a URL such as ``s3://bucket/dir``). A local
     path is written one way (``file://``, ``.`` and a trailing ``/`` dropped), so the same bag written two
     ways is one bag: listed twice in a manifest, or already in the dataset an ``--append`` adds to."""
-    if uri.startswith("file://"):
-        uri = uri.removeprefix("file://")
-    if not _is_url(uri) and uri:
-        uri = posixpath.normpath(uri) if uri.startswith("/") or not base_dir else uri
-    if _is_url(uri) or uri.startswith("/") or not base_dir:
+    uri = uri.removeprefix("file://")
+    if _is_url(uri):
         return uri
+    if uri.startswith("/") or not base_dir:
+        return posixpath.normpath(uri) if uri else uri
     protocol, sep, path = base_dir.partition("://")
     if not sep:
         return posixpath.normpath(posixpath.join(base_dir, uri))

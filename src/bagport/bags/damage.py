@@ -79,9 +79,8 @@ def damaged_bag(
     """The error for a bag whose ``action`` ("cannot be opened", "reading failed") raised ``err``;
     walks ``files`` to name the damaged record. ``last``: (topic, log_ns) of the last intact message."""
     damage = locate_damage(storage, list(files))
-    if (
-        damage is not None and damage.fix is not None
-    ):  # a file cut short: what happened, not the library's words
+    # damage with a fix of its own (a file cut short) says what happened, not the library's words
+    if damage is not None and damage.fix is not None:
         return BagReadError(f"{action}: {damage.describe()}", uri=uri, fix=damage.fix)
     what = f"{action} ({_one_line(err)})"
     if damage is not None:

@@ -81,6 +81,11 @@ def _metadata(folder: BagPath, uri: str) -> dict[str, Any] | None:
         ) from err
 
 
+def _listed(metadata: dict[str, Any]) -> list[str]:
+    """The data files ``metadata.yaml`` lists, by name."""
+    return [PurePath(str(x)).name for x in metadata.get("relative_file_paths") or []]
+
+
 def _metadata_problem(metadata: dict[str, Any], present: list[BagPath], storage: Storage) -> str | None:
     storage_id = str(metadata.get("storage_identifier") or "")
     if storage_id not in (Storage.MCAP, Storage.SQLITE3):
@@ -91,7 +96,7 @@ def _metadata_problem(metadata: dict[str, Any], present: list[BagPath], storage:
             f"metadata.yaml says storage_identifier: {storage_id}, but {content[0]} is {storage} by its content "
             f"(Fix: set storage_identifier: {storage} in metadata.yaml, or re-create it with `ros2 bag reindex`)"
         )
-    listed = [PurePath(str(x)).name for x in metadata.get("relative_file_paths") or []]
+    listed = _listed(metadata)
     names = [p.name for p in present]
     if sorted(listed) != sorted(names):
         return f"metadata.yaml lists {listed} but the folder has {names}"
@@ -102,7 +107,7 @@ def _refuse_missing_files(metadata: dict[str, Any], present: list[BagPath], uri:
     """A recording whose ``metadata.yaml`` lists more data files than the folder holds, some of them absent,
     is incomplete (a split file lost, or a copy not finished): converted, it would be a shorter episode that
     looks whole. Fewer files is the test, so a folder whose files were renamed still reads (with a warning)."""
-    listed = [PurePath(str(x)).name for x in metadata.get("relative_file_paths") or []]
+    listed = _listed(metadata)
     names = {p.name for p in present}
     missing = [name for name in listed if name not in names]
     if missing and len(present) < len(listed):

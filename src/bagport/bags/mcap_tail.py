@@ -9,30 +9,31 @@ headers (a seek per record: nothing is read into memory).
 from __future__ import annotations
 
 import struct
+from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
 
 from bagport.bags.detect import MCAP_MAGIC as MAGIC
 from bagport.bags.remote import RemotePath
 
-__all__ = ["MAGIC", "McapCut", "mcap_cut"]
+__all__ = ["FIX", "MAGIC", "McapCut", "mcap_cut"]
 _RECORD_HEAD = struct.Struct("<BQ")
 _CHUNK, _DATA_END = 0x06, 0x0F
 
 
+@dataclass(frozen=True, slots=True)
 class McapCut:
     """Where a file that starts as MCAP but does not end as one stops."""
 
-    def __init__(self, name: str, size: int, record_at: int | None, chunks: int, data_whole: bool) -> None:
-        self.name = name
-        self.size = size
-        """The file's length in bytes."""
-        self.record_at = record_at
-        """The byte offset of the record the file ends inside (``None``: it ends between records)."""
-        self.chunks = chunks
-        """Whole chunks before the cut."""
-        self.data_whole = data_whole
-        """The data section's end record is there: only the summary and footer are missing."""
+    name: str
+    size: int
+    """The file's length in bytes."""
+    record_at: int | None
+    """The byte offset of the record the file ends inside (``None``: it ends between records)."""
+    chunks: int
+    """Whole chunks before the cut."""
+    data_whole: bool
+    """The data section's end record is there: only the summary and footer are missing."""
 
     def describe(self) -> str:
         """One clause: where the bytes end, and what is whole before."""

@@ -60,17 +60,18 @@ def dataset_bags(root: str) -> DatasetBags:
         with fs.open(record_path, "r", encoding="utf-8") as handle:
             record = json.load(handle)
         windows = record.get("manifest", {}).get("windows")  # by manifest entry; absent in older records
-
-        def window_of(entry: dict[str, Any], windows: dict[str, str] | None = windows) -> str | None:
-            return None if windows is None else windows.get(str(entry.get("manifest_entry")), "")
-
         for episode in record.get("episodes", []):
-            stamps = bags.kept.setdefault((str(episode["bag_uri"]), window_of(episode)), {})
+            stamps = bags.kept.setdefault((str(episode["bag_uri"]), _window_of(episode, windows)), {})
             stamps[str(episode.get("source_stamp", ""))] = str(episode.get("bag_fingerprint", ""))
         for excluded in record.get("excluded", []):
-            key = (str(excluded["bag_uri"]), window_of(excluded), str(excluded.get("source_stamp", "")))
-            bags.left_out.add(key)
+            window = _window_of(excluded, windows)
+            bags.left_out.add((str(excluded["bag_uri"]), window, str(excluded.get("source_stamp", ""))))
     return bags
+
+
+def _window_of(entry: dict[str, Any], windows: dict[str, str] | None) -> str | None:
+    """A record entry's manifest window (``""``: the whole bag; ``None``: a record that keeps none)."""
+    return None if windows is None else windows.get(str(entry.get("manifest_entry")), "")
 
 
 def dataset_report(root: str) -> DatasetReport:

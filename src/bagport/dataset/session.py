@@ -139,10 +139,11 @@ def open_write(
     base = read_base(output) if appending else None
     if base is None:
         refuse_existing(output, overwrite=overwrite)
-    if expect_episodes is not None and (base.episodes if base is not None else 0) != expect_episodes:
+    held = base.episodes if base is not None else 0
+    if expect_episodes is not None and held != expect_episodes:
         raise DatasetWriteError(
             f"{output} changed since this run was planned (it held {expect_episodes} episode(s), now "
-            f"{base.episodes if base is not None else 0}): another run wrote to it meanwhile, and may have "
+            f"{held}): another run wrote to it meanwhile, and may have "
             "appended this run's bags already; nothing was written. Fix: run the append again (it adds only what "
             "is still new, reusing the staged episodes); one run at a time per output."
         )

@@ -30,6 +30,7 @@ from bagport.bags.mcap_tail import FIX as CUT_FIX
 from bagport.bags.mcap_tail import mcap_cut
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
+from bagport.bags.sqlite_tail import sqlite_cut
 
 __all__ = ["Damage", "locate_damage"]
 
@@ -157,6 +158,9 @@ def _locate_mcap(path: Path | RemotePath) -> Damage | None:
 def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
     if isinstance(path, RemotePath):
         return None  # SQLite bags are downloaded before they are read; a remote path is not opened here
+    cut = sqlite_cut(path)
+    if cut is not None:
+        return Damage(path.name, None, cut.describe(), fix=cut.fix())
     uri = f"file:{quote(str(path.resolve()))}?mode=ro&immutable=1"
     try:
         with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:

@@ -1,0 +1,86 @@
+"""A SQLite data file cut short: where its bytes end, and how long its header says it is.
+
+A rosbag2 ``.db3`` file is whole pages (SQLite writes nothing else), and its 100-byte header records the
+page size and, in every SQLite since 3.7.0, the number of pages. A copy or download that did not finish
+(or a disk that filled) leaves fewer bytes than that; SQLite then answers "database disk image is
+malformed", which reads as damage. This says what happened instead, from the header alone.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from pathlib import Path
+
+from bagport.bags.remote import RemotePath
+
+__all__ = ["HEADER_MAGIC", "SqliteCut", "sqlite_cut"]
+
+HEADER_MAGIC = b"SQLite format 3\x00"
+_HEADER_BYTES = 100
+_PAGE_SIZE = struct.Struct(">H")  # at byte 16; 1 means 65,536
+_COUNTER = struct.Struct(">I")  # the change counter at byte 24, the page count at 28, valid-for at 92
+
+
+@dataclass(frozen=True, slots=True)
+class SqliteCut:
+    """Where a SQLite file shorter than its header says stops."""
+
+    name: str
+    size: int
+    """The file's length in bytes."""
+    expected: int | None
+    """The length its header gives (pages times page size); ``None`` when the header itself is cut."""
+    page_size: int | None
+
+    def describe(self) -> str:
+        """One clause: where the bytes end, and what the header promised."""
+        why = "it was cut short (a copy or download that did not finish, or a disk that filled)"
+        if self.page_size is None:
+            return f"the file ends at byte {self.size}, inside SQLite's {_HEADER_BYTES}-byte header: {why}"
+        whole = self.size // self.page_size
+        if self.expected is None:
+            return (
+                f"the file ends at byte {self.size}, {self.size % self.page_size} bytes into page {whole + 1} "
+                f"(a SQLite file is whole pages of {self.page_size} bytes): {why}; {whole} page(s) before are whole"
+            )
+        return (
+            f"the file ends at byte {self.size}, but its header says it holds {self.expected // self.page_size} "
+            f"pages of {self.page_size} bytes ({self.expected} bytes): {why}; {whole} page(s) before are whole"
+        )
+
+    def fix(self) -> str:
+        """What to do: copy it again (its whole size, when known), or salvage the rows of its whole pages."""
+        size = f" (the whole file is {self.expected} bytes)" if self.expected is not None else ""
+        return (
+            f"copy the bag again from the robot or a backup{size}; without one, "
+            "`sqlite3 FILE .recover | sqlite3 FIXED.db3` salvages the rows of its whole pages "
+            "(then `ros2 bag reindex` the folder)."
+        )
+
+
+def sqlite_cut(path: Path | RemotePath) -> SqliteCut | None:
+    """The cut of a file that starts as SQLite but is shorter than its header says (or is not whole pages);
+    ``None`` for a whole file, one that does not start as SQLite, or one whose header keeps no page count
+    (written by a SQLite older than 3.7.0: nothing to compare)."""
+    size = path.stat().st_size
+    with path.open("rb") as handle:
+        header = handle.read(_HEADER_BYTES)
+    if len(header) < _HEADER_BYTES:
+        started = bool(header) and HEADER_MAGIC.startswith(header[: len(HEADER_MAGIC)])
+        return SqliteCut(path.name, size, None, None) if started else None
+    if not header.startswith(HEADER_MAGIC):
+        return None
+    (raw_page_size,) = _PAGE_SIZE.unpack_from(header, 16)
+    page_size = 65_536 if raw_page_size == 1 else raw_page_size
+    if page_size < 512 or page_size & (page_size - 1):
+        return None  # a damaged header: the damage walk says where
+    (counter,) = _COUNTER.unpack_from(header, 24)
+    (pages,) = _COUNTER.unpack_from(header, 28)
+    (valid_for,) = _COUNTER.unpack_from(header, 92)
+    expected = pages * page_size if pages and counter == valid_for else None
+    if expected is not None and size < expected:
+        return SqliteCut(path.name, size, expected, page_size)
+    if size % page_size:
+        return SqliteCut(path.name, size, expected, page_size)
+    return None

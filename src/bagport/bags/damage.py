@@ -18,6 +18,7 @@ from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 from bagport.bags.locate import locate_damage
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
+from bagport.bags.sqlite_tail import SALVAGE
 from bagport.bags.typeload import one_line
 from bagport.errors import BagReadError
 
@@ -49,8 +50,7 @@ _REINDEX = "reindex the bag (`rosbag reindex` for ROS 1, `ros2 bag reindex` for 
 _FIXES = {
     Storage.MCAP: "copy the file again from the robot or a backup (its bytes changed after recording); "
     "`mcap doctor FILE` lists the damaged records, `mcap recover FILE -o FIXED.mcap` keeps the intact ones.",
-    Storage.SQLITE3: "copy the bag again from the robot or a backup; without one, "
-    "`sqlite3 FILE .recover | sqlite3 FIXED.db3` salvages the intact rows (then `ros2 bag reindex` the folder).",
+    Storage.SQLITE3: f"copy the bag again from the robot or a backup; without one, {SALVAGE}.",
     Storage.ROS1: "copy the bag again from the robot or a backup; if only its index is damaged "
     "(the messages are intact), `rosbag reindex` rebuilds it.",
 }

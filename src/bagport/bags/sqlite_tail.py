@@ -14,12 +14,19 @@ from pathlib import Path
 
 from bagport.bags.remote import RemotePath
 
-__all__ = ["HEADER_MAGIC", "SqliteCut", "sqlite_cut"]
+__all__ = ["HEADER_MAGIC", "SALVAGE", "SqliteCut", "sqlite_cut"]
 
 HEADER_MAGIC = b"SQLite format 3\x00"
 _HEADER_BYTES = 100
 _PAGE_SIZE = struct.Struct(">H")  # at byte 16; 1 means 65,536
 _COUNTER = struct.Struct(">I")  # the change counter at byte 24, the page count at 28, valid-for at 92
+
+SALVAGE = (
+    "`sqlite3 FILE .dump | sed 's/^ROLLBACK; -- due to errors$/COMMIT;/' | sqlite3 FIXED.db3` keeps the rows "
+    "SQLite can still read; convert FIXED.db3 on its own (the folder's metadata.yaml promises the lost messages)"
+)
+"""How to salvage the readable rows of a damaged or cut ``.db3`` with the sqlite3 command-line tool (``.dump``
+ends a damaged database with ``ROLLBACK``, which would undo the copy; ``.recover`` is not in every build)."""
 
 
 @dataclass(frozen=True, slots=True)
@@ -50,13 +57,9 @@ class SqliteCut:
         )
 
     def fix(self) -> str:
-        """What to do: copy it again (its whole size, when known), or salvage the rows of its whole pages."""
+        """What to do: copy it again (its whole size, when known), or salvage the rows that can be read."""
         size = f" (the whole file is {self.expected} bytes)" if self.expected is not None else ""
-        return (
-            f"copy the bag again from the robot or a backup{size}; without one, "
-            "`sqlite3 FILE .recover | sqlite3 FIXED.db3` salvages the rows of its whole pages "
-            "(then `ros2 bag reindex` the folder)."
-        )
+        return f"copy the bag again from the robot or a backup{size}; without one, {SALVAGE}."
 
 
 def sqlite_cut(path: Path | RemotePath) -> SqliteCut | None:

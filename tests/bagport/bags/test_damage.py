@@ -81,7 +81,7 @@ def test_sqlite_page_damage_names_the_page_offset(tmp_path: Path) -> None:
     assert "database disk image is malformed" in text
     page = page_start // page_size + 1
     assert f"ep.db3 at byte offset {page_start}: page {page} of messages has a damaged b-tree header" in text
-    assert "Fix: copy the bag again" in text and ".recover" in text
+    assert "Fix: copy the bag again" in text and ".dump" in text
 
 
 def test_sqlite_row_holding_a_number_where_the_message_belongs_names_topic_and_time(tmp_path: Path) -> None:

@@ -4,12 +4,13 @@ end and the length its header gives, and the fix for it: not SQLite's "database 
 from __future__ import annotations
 
 import shutil
+import subprocess
 from pathlib import Path
 
 import pytest
 
 from bagport.bags import open_bag
-from bagport.bags.sqlite_tail import sqlite_cut
+from bagport.bags.sqlite_tail import SALVAGE, sqlite_cut
 from bagport.episode import convert_episode
 from bagport.errors import BagportError, BagReadError
 from bagport.synth import EpisodeSpec, write_episode_bag
@@ -102,5 +103,19 @@ def test_opening_or_converting_a_cut_bag_says_it_was_cut_short(
         message = str(caught.value)
         assert isinstance(caught.value, BagReadError), message
         assert f"ep.db3: the file ends at byte {size}" in message and "cut short" in message, message
-        assert f"the whole file is {whole} bytes" in message and ".recover" in message, message
+        assert f"the whole file is {whole} bytes" in message and ".dump" in message, message
         assert "malformed" not in message and "Error" not in message, message
+
+
+@pytest.mark.skipif(shutil.which("sqlite3") is None, reason="the sqlite3 command-line tool is not installed")
+def test_the_salvage_the_fix_gives_makes_a_bag_that_converts(bag: Path, tmp_path: Path) -> None:
+    """The fix's command, run as given, keeps the rows before the cut, and bagport reads the new file alone."""
+    whole = (bag / "ep.db3").stat().st_size
+    cut = _cut_copy(bag, tmp_path / "ep", whole // 2)
+    command = SALVAGE.split("`")[1].replace("FILE", str(cut / "ep.db3"))
+    subprocess.run(["bash", "-c", command], cwd=tmp_path, check=True, capture_output=True)
+    with open_bag(str(tmp_path / "FIXED.db3")) as salvaged, open_bag(str(bag)) as original:
+        assert 0 < salvaged.info.message_count < original.info.message_count
+        kept = [(m.topic, m.log_time_ns, m.raw_size, m.header_stamp_ns()) for m in salvaged.messages()]
+        first = [(m.topic, m.log_time_ns, m.raw_size, m.header_stamp_ns()) for m in original.messages()]
+    assert set(kept) <= set(first)  # the rows kept are recorded ones (topic, time, size, stamp)

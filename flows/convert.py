@@ -73,6 +73,8 @@ def _label(uri: str) -> str:
 def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     logger = get_run_logger()
     plan = _checked_plan(config) or plan_task(config)
+    if plan.staging_removed:
+        logger.info("%s: %s", plan.staging_note(), ", ".join(plan.staging_removed))
     finished = _nothing_to_convert(plan)
     if finished is not None:
         return finished

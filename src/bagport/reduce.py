@@ -82,6 +82,8 @@ def run_record(plan: RunPlan, staged: Sequence[PlannedEpisode] = ()) -> dict[str
             "reused": reused,
         },
         "episodes_reused": len(reused),
+        # whether this run's staged episodes stay after its commit (a later append removes them if not)
+        "keep_staging": plan.config.keep_staging,
         "encoder": EncoderSettings.from_dict(plan.config.encoder).to_info(),
         "host_cpus": os.cpu_count(),
     }

@@ -24,13 +24,13 @@ from bagport.dataset.history import dataset_bags, recorded_failures, recorded_wr
 from bagport.dataset.repair import repair_dataset
 from bagport.dataset.replace import refuse_existing
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
-from bagport.episode.staged import PlannedEpisode, list_staged, split_staged
+from bagport.episode.staged import PlannedEpisode, list_staged, remove_finished_staging, split_staged
 from bagport.formats import check_format_outputs
 from bagport.manifest import Manifest, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
 from bagport.segment import segment_request, segments_bags
 from bagport.selection import EpisodeFailure
-from bagport.uris import read_text, require_bucket
+from bagport.uris import is_local, read_text, require_bucket
 from bagport.video import EncoderSettings
 
 __all__ = [
@@ -67,6 +67,16 @@ class RunPlan:
     dataset_episodes: int | None = None
     """An append's: the episodes the dataset held when the plan chose the bags it does not hold yet (0: no
     dataset yet). The write is refused if another run changed that number since."""
+    staging_removed: tuple[str, ...] = ()
+    """An append's: staged episodes the dataset holds already, left in the staging store by a run killed
+    after its commit, which this plan removed (not with ``--keep-staging``)."""
+
+    def staging_note(self) -> str:
+        """One line on :attr:`staging_removed`, for the run's log and the CLI."""
+        return (
+            f"removed {len(self.staging_removed)} staged episode(s) from {self.config.resolved_staging()} that "
+            f"{self.config.output} holds already (a run killed after its commit left them)"
+        )
 
 
 def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
@@ -98,8 +108,13 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     msg_definitions = read_msg_path(config.msg_path) if config.msg_path else {}
     bags = manifest.bags
     dataset_episodes = 0 if config.append else None
+    removed: tuple[str, ...] = ()
     if config.append and fs.exists(out_path):
-        bags = bags_to_append(bags, dataset_bags(config.output), stamp_of, msg_definitions)
+        known = dataset_bags(config.output)
+        if not config.keep_staging:  # a local output's recovery above refused if a write were live
+            finished = known.committed_staged | (known.newest_staged if is_local(fs) else set())
+            removed = remove_finished_staging(staging, finished)
+        bags = bags_to_append(bags, known, stamp_of, msg_definitions)
         dataset_episodes = check_append_fits(config, contract, adding=bool(bags))
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
@@ -121,7 +136,10 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         )
         for bag in bags
     )
-    plan = RunPlan(config, contract, manifest, requests, contract_text, qa, dataset_episodes=dataset_episodes)
+    plan = RunPlan(
+        config, contract, manifest, requests, contract_text, qa,
+        dataset_episodes=dataset_episodes, staging_removed=removed,
+    )  # fmt: skip
     return _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
 
 

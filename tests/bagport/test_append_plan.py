@@ -9,14 +9,17 @@ import shutil
 from pathlib import Path
 
 import pytest
+from fsspec.core import url_to_fs
 
 from bagport.config import ConvertConfig
+from bagport.dataset.history import dataset_bags
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import DatasetWriteError
 from bagport.reduce import reduce_run
 from bagport.run import plan_run, stage_all
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT, SMALL_CAMERAS
+from tests.s3 import moto_s3, s3_bucket
 
 SPEC = EpisodeSpec(duration_s=1.5, cameras=SMALL_CAMERAS)
 
@@ -141,3 +144,98 @@ def test_an_append_with_other_encoder_settings_is_refused_before_anything_conver
     ):
         plan_run(config)
     assert not (out.parent / "ds.staging").exists()  # nothing converted
+
+
+def _staged(out: Path) -> list[str]:
+    episodes = Path(f"{out}.staging") / "episodes"
+    return sorted(p.name for p in episodes.iterdir()) if episodes.is_dir() else []
+
+
+def test_staged_episodes_a_run_killed_after_its_commit_left_are_removed_by_the_next_append(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The kill is a staging clean-up that never ran (tests/flows/test_cli_repair.py kills a real run there);
+    a run that kept its staging (``--keep-staging``) keeps it."""
+    bag, manifest, out = _appended_once(tmp_path)
+    assert _staged(out) == []
+    other = tmp_path / "bags" / "other"
+    write_episode_bag(other, "mcap", EpisodeSpec(duration_s=1.5, cameras=SMALL_CAMERAS, seed=3))
+    manifest.write_text(f"bags:\n  - uri: {bag}\n  - uri: {other}\n")
+    with monkeypatch.context() as patched:
+        patched.setattr("bagport.reduce._remove_staged", lambda plan, dirs: None)
+        assert _append(manifest, out) == [str(other)]
+    left = _staged(out)
+    assert len(left) == 1 and left[0].startswith("other-")
+    assert dataset_bags(str(out)).newest_staged == set(left)
+    config = ConvertConfig(
+        manifest=str(manifest),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(out),
+        encoder=FAST_CODEC,
+        append=True,
+    )
+    kept = plan_run(config.model_copy(update={"keep_staging": True}))
+    assert kept.staging_removed == () and _staged(out) == left
+    plan = plan_run(config)
+    assert plan.staging_removed == tuple(left) and not plan.requests and _staged(out) == []
+    assert "removed 1 staged episode(s)" in plan.staging_note()
+    assert _episodes(out) == 2  # the dataset untouched
+
+
+def test_a_run_that_kept_its_staging_keeps_it_through_later_appends(tmp_path: Path) -> None:
+    bag = tmp_path / "bags" / "ep"
+    write_episode_bag(bag, "mcap", SPEC)
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - uri: {bag}\n")
+    out = tmp_path / "ds"
+    config = ConvertConfig(
+        manifest=str(manifest),
+        contract=str(SAMPLE_CONTRACT),
+        output=str(out),
+        encoder=FAST_CODEC,
+        append=True,
+    )
+    kept = plan_run(config.model_copy(update={"keep_staging": True}))
+    reduce_run(kept, stage_all(kept))
+    staged = _staged(out)
+    assert len(staged) == 1
+    known = dataset_bags(str(out))
+    assert known.newest_staged == set() and known.committed_staged == set()
+    assert plan_run(config).staging_removed == () and _staged(out) == staged
+
+
+def test_on_an_object_store_the_newest_run_s_staged_episodes_wait_for_a_later_append(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An object store's recovery cannot tell a live write from a dead one, and the newest run may still be
+    writing other formats from its staged episodes: its leftovers go once a later run has committed."""
+    bags = []
+    for seed in range(3):
+        bags.append(tmp_path / "bags" / f"ep{seed}")
+        write_episode_bag(bags[-1], "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS, seed=seed))
+    manifest = tmp_path / "m.yaml"
+    with moto_s3() as env:
+        s3_bucket(env, "fleet")
+        config = ConvertConfig(
+            manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output="s3://fleet/ds", encoder=FAST_CODEC,
+            append=True,
+        )  # fmt: skip
+        staging = url_to_fs(config.resolved_staging())
+
+        def staged() -> list[str]:
+            staging[0].invalidate_cache()
+            found = staging[0].glob(f"{staging[1]}/episodes/*/episode.json")
+            return sorted(str(p).split("/")[-2] for p in found)
+
+        for n in (1, 2, 3):
+            manifest.write_text("bags:\n" + "".join(f"  - uri: {b}\n" for b in bags[:n]))
+            with monkeypatch.context() as patched:
+                patched.setattr("bagport.reduce._remove_staged", lambda plan, dirs: None)
+                plan = plan_run(config)
+                reduce_run(plan, stage_all(plan))
+            if n == 2:
+                assert plan.staging_removed == () and len(staged()) == 2  # the first run's is the newest's
+        assert [s.split("-")[0] for s in staged()] == ["ep1", "ep2"]  # the first run's went at the third plan
+        final = plan_run(config)
+        assert [s.split("-")[0] for s in final.staging_removed] == ["ep1"]
+        assert [s.split("-")[0] for s in staged()] == ["ep2"]  # the newest run's waits

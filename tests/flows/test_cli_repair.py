@@ -83,3 +83,30 @@ def test_an_append_killed_mid_commit_is_reported_repaired_and_appended_once(tmp_
     assert sum(rows) == report.frames  # every data row described by meta/, none twice
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".")) == []
     assert [p.name for p in (tmp_path / "tmp").iterdir() if p.name.startswith("bagport-")] == []
+
+
+def test_an_append_killed_after_its_commit_leaves_staged_episodes_the_next_append_removes(
+    tmp_path: Path,
+) -> None:
+    """Killed after the commit's last step, before the run removed its staged episodes: the dataset has the
+    new episode; the next append (with nothing new) removes the leftovers and says so."""
+    (tmp_path / "tmp").mkdir()
+    for i, name in enumerate(("a", "b")):
+        write_episode_bag(tmp_path / name, "mcap", EpisodeSpec(duration_s=0.6, seed=i, cameras=CAMERAS))
+    (tmp_path / "one.yaml").write_text("bags:\n  - uri: a\n")
+    (tmp_path / "two.yaml").write_text("bags:\n  - uri: a\n  - uri: b\n")
+    (tmp_path / "codec.yaml").write_text(yaml.safe_dump(FAST_CODEC))
+    assert _convert(tmp_path, "one.yaml").returncode == 0
+    staging = tmp_path / "ds.staging" / "episodes"
+
+    killed = _convert(tmp_path, "two.yaml", crash_at="local.append.cleaned")
+    assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
+    left = sorted(p.name for p in staging.iterdir())
+    assert len(left) == 1 and left[0].startswith("b-")
+
+    again = _convert(tmp_path, "two.yaml")
+    assert again.returncode == 0, again.stderr[-2000:]
+    assert f"removed 1 staged episode(s) from {tmp_path / 'ds.staging'}" in again.stderr
+    assert "nothing to do" in again.stderr
+    assert list(staging.iterdir()) == []
+    assert validate_dataset(tmp_path / "ds", repo_id="test/repair").episodes == 2

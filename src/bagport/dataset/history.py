@@ -39,6 +39,13 @@ class DatasetBags:
     """Bags with an episode in the dataset: ``{(URI, window): {source stamp: bag fingerprint}}``."""
     left_out: set[tuple[str, str | None, str]] = field(default_factory=set)
     """Bags a run excluded (failed QA or conversion), with the stamp of the files then."""
+    committed_staged: set[str] = field(default_factory=set)
+    """The staged episode ids of the dataset's episodes, from the runs that did not ``--keep-staging`` (older
+    records say nothing: kept) other than the newest: a staged episode still there under one of them was
+    left by a run killed after its commit."""
+    newest_staged: set[str] = field(default_factory=set)
+    """The same of the newest run, which may still be finishing (other formats read its staged episodes
+    after its commit) unless the output's recovery found no live write."""
 
     def kept_as(self, uri: str, window: str) -> dict[str, str] | None:
         """The stamps and fingerprints the bag's window was appended with, or ``None`` when it was not."""
@@ -56,13 +63,19 @@ def dataset_bags(root: str) -> DatasetBags:
     its own (recorded without a stamp: a transient I/O error)."""
     fs, path = url_to_fs(root)
     bags = DatasetBags()
-    for record_path in fs.glob(f"{path.rstrip('/')}/meta/provenance/run*.json"):
+    records = [str(p) for p in fs.glob(f"{path.rstrip('/')}/meta/provenance/run*.json")]
+    newest = latest_record(records)
+    for record_path in records:
         with fs.open(record_path, "r", encoding="utf-8") as handle:
             record = json.load(handle)
         windows = record.get("manifest", {}).get("windows")  # by manifest entry; absent in older records
+        removable = record.get("keep_staging") is False  # older records say nothing: kept
+        staged = bags.newest_staged if record_path == newest else bags.committed_staged
         for episode in record.get("episodes", []):
             stamps = bags.kept.setdefault((str(episode["bag_uri"]), _window_of(episode, windows)), {})
             stamps[str(episode.get("source_stamp", ""))] = str(episode.get("bag_fingerprint", ""))
+            if removable and episode.get("staged_episode_id"):
+                staged.add(str(episode["staged_episode_id"]))
         for excluded in record.get("excluded", []):
             window = _window_of(excluded, windows)
             bags.left_out.add((str(excluded["bag_uri"]), window, str(excluded.get("source_stamp", ""))))

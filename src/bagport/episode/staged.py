@@ -14,9 +14,10 @@ write and :meth:`PlannedEpisode.apply` puts it on the staged summary there.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -30,7 +31,15 @@ from bagport.request import EpisodeRequest
 from bagport.staging import EPISODE_SUMMARY, EpisodeSummary, episode_dir, staged_path
 from bagport.uris import is_local
 
-__all__ = ["PlannedEpisode", "StagedSplit", "list_staged", "matches", "split_staged", "staged_with_prefix"]
+__all__ = [
+    "PlannedEpisode",
+    "StagedSplit",
+    "list_staged",
+    "matches",
+    "remove_finished_staging",
+    "split_staged",
+    "staged_with_prefix",
+]
 
 
 @dataclass(frozen=True, slots=True)
@@ -122,6 +131,25 @@ def list_staged(staging_uri: str) -> frozenset[str]:
     except (FileNotFoundError, NotADirectoryError):
         return frozenset()
     return frozenset(str(marker).rstrip("/").rsplit("/", 2)[-2] for marker in markers)
+
+
+def remove_finished_staging(staging_uri: str, finished: Collection[str]) -> tuple[str, ...]:
+    """Remove the staged episodes (complete or not) whose ids are in ``finished``: episodes a dataset holds
+    already (:attr:`bagport.dataset.history.DatasetBags.committed_staged`), which a run killed after its
+    commit left behind. One listing of the store; the ids removed, sorted."""
+    if not finished:
+        return ()
+    fs, root = url_to_fs(episode_dir(staging_uri, ""))
+    fs.invalidate_cache(url_to_fs(staging_uri)[1])
+    try:
+        names = {str(p).rstrip("/").rsplit("/", 1)[-1] for p in fs.ls(root, detail=False)}
+    except (FileNotFoundError, NotADirectoryError):
+        return ()
+    removed = sorted(names & set(finished))
+    for episode_id in removed:
+        with contextlib.suppress(FileNotFoundError):  # another run removing it too
+            fs.rm(staged_path(root, episode_id), recursive=True)
+    return tuple(removed)
 
 
 def staged_with_prefix(staging_uri: str, prefix: str) -> list[str]:

@@ -10,6 +10,9 @@ reading message data:
 - ROS 1: the connection's index entries (one per message, with its time).
 
 An MCAP written without chunks has no message index: its topics get no count (unchecked).
+
+:func:`index_time_range` gives the first and last log time the data files' own indexes hold (rosbags
+takes a rosbag2 folder's times from its ``metadata.yaml``, which can be stale).
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ from rosbags.rosbag2.reader import DirectoryReader
 from rosbags.rosbag2.storage_mcap import McapReader
 from rosbags.rosbag2.storage_sqlite3 import Sqlite3Reader
 
-__all__ = ["UNBOUNDED_NS", "window_counts"]
+__all__ = ["UNBOUNDED_NS", "index_time_range", "window_counts"]
 
 UNBOUNDED_NS = 2**63 - 1
 _MESSAGE_INDEX = 0x07
@@ -42,6 +45,42 @@ def _storages(reader: Any) -> Iterator[Any]:
             yield from sub.storage.storages
         else:
             yield sub.storage
+
+
+def _sqlite_time_range(storage: Sqlite3Reader) -> tuple[int, int] | None:
+    """The first and last ``messages.timestamp`` (``(UNBOUNDED_NS, -1)``: no message), when an index on it
+    answers without a scan of the table; else ``None``."""
+    if storage.dbconn is None:
+        raise ValueError("the SQLite storage is closed")
+    indexed = storage.dbconn.execute(
+        "SELECT 1 FROM sqlite_master WHERE type = 'index' AND tbl_name = 'messages' AND sql LIKE '%timestamp%'"
+    ).fetchone()
+    if indexed is None:
+        return None
+    ((first, last),) = storage.dbconn.execute("SELECT MIN(timestamp), MAX(timestamp) FROM messages")
+    return (UNBOUNDED_NS, -1) if first is None else (int(first), int(last))
+
+
+def index_time_range(reader: Any) -> tuple[int, int] | None:
+    """``(first, last)`` log time (ns) of the messages of a rosbag2 bag (rosbags' AnyReader ``reader``)
+    from its data files' indexes (MCAP statistics or chunk indexes, SQLite's timestamp index); ``None`` for
+    a ROS 1 bag (rosbags reads its times from its data already), an empty bag, or a file that cannot say."""
+    first, last = UNBOUNDED_NS, -1
+    for storage in _storages(reader):
+        if isinstance(storage, McapReader):
+            statistics = storage.statistics
+            if statistics is None:
+                return None
+            found = (statistics.start_time, statistics.end_time) if statistics.message_count else None
+        elif isinstance(storage, Sqlite3Reader):
+            found = _sqlite_time_range(storage)
+            if found is None:
+                return None
+        else:
+            return None
+        if found is not None:
+            first, last = min(first, found[0]), max(last, found[1])
+    return (first, last) if last >= 0 else None
 
 
 def _mcap_in_window(bio: Any, offset: int, start_ns: int, stop_ns: int) -> int:

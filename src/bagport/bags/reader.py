@@ -22,7 +22,7 @@ from bagport.bags.checksums import bag_checksums
 from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag, short_read
 from bagport.bags.detect import detect_storage
 from bagport.bags.download import download_bag
-from bagport.bags.indexcount import window_counts
+from bagport.bags.indexcount import index_time_range, window_counts
 from bagport.bags.layout import BagPath, ReadPlan, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.metadata_yaml import parse_metadata
@@ -175,18 +175,38 @@ class RosbagsReader:
             counts[topic] = (msgtype, count + int(conn.msgcount))
         self._promised = {topic: count for topic, (_, count) in counts.items()}
         message_count = int(self._reader.message_count)
+        start_ns, end_ns, stale = self._times() if message_count else (0, 0, ())
         return BagInfo(
             uri=self._uri,
             storage=storage,
             files=tuple(sorted(p.name for p in plan.files)),
             size_bytes=sum(p.stat().st_size for p in plan.files),
-            start_ns=int(self._reader.start_time) if message_count else 0,
-            end_ns=int(self._reader.end_time) if message_count else 0,
+            start_ns=start_ns,
+            end_ns=end_ns,
             message_count=message_count,
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
             custom_data=_custom_data(path),
             checksums=bag_checksums(storage, plan.data_files),
-            warnings=(*plan.warnings, *self._reader.warnings()),
+            warnings=(*plan.warnings, *self._reader.warnings(), *stale),
+        )
+
+    def _times(self) -> tuple[int, int, tuple[str, ...]]:
+        """The bag's first log time and one past its last, from its data files' indexes where they say
+        (:func:`index_time_range`), with a warning when ``metadata.yaml`` says otherwise: windows
+        (``start_s``/``end_s``) and a whole-bag episode count from these times, so stale metadata (the real
+        ``wbag``'s covers only the last of its five files) must not cut the recording short."""
+        start_ns, end_ns = int(self._reader.start_time), int(self._reader.end_time)
+        try:
+            found = index_time_range(self._reader)
+        except STORAGE_ERRORS:
+            found = None  # reading the messages says what is wrong
+        if found is None or (found[0], found[1] + 1) == (start_ns, end_ns):
+            return start_ns, end_ns, ()
+        first_ns, last_ns = found
+        return first_ns, last_ns + 1, (
+            f"metadata.yaml gives the recording's log times as {start_ns}..{end_ns - 1} ns but its data files "
+            f"hold messages from {first_ns} to {last_ns} ns: the data files' times are used (metadata.yaml was "
+            "written for another file of the recording, or edited; `ros2 bag reindex` rewrites it)",
         )
 
     @property

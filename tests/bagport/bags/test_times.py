@@ -15,6 +15,7 @@ import yaml
 from bagport.bags import open_bag
 from bagport.episode import convert_episode
 from bagport.synth import EpisodeSpec, write_episode_bag
+from bagport.synth.write import SynthStorage
 from bagport.timewindow import TimeWindow
 from tests.helpers import SMALL_CAMERAS, episode_request, realbag
 
@@ -46,7 +47,7 @@ def _stale_copy(bag: Path, target: Path, shift_ns: int) -> Path:
 
 @pytest.mark.parametrize("storage", ["mcap", "sqlite3"])
 def test_a_window_of_a_bag_with_stale_metadata_converts_as_with_true_metadata(
-    tmp_path: Path, storage: str
+    tmp_path: Path, storage: SynthStorage
 ) -> None:
     bag = tmp_path / "true" / "ep"
     write_episode_bag(bag, storage, SPEC)

@@ -24,15 +24,19 @@ from tests.s3 import moto_s3, s3_bucket
 SPEC = EpisodeSpec(duration_s=1.5, cameras=SMALL_CAMERAS)
 
 
-def _append(manifest: Path, out: Path) -> list[str]:
-    """Append the manifest's new bags to ``out``; the URIs of the bags the plan adds."""
-    config = ConvertConfig(
+def _append_config(manifest: Path, out: Path | str) -> ConvertConfig:
+    return ConvertConfig(
         manifest=str(manifest),
         contract=str(SAMPLE_CONTRACT),
         output=str(out),
         encoder=FAST_CODEC,
         append=True,
     )
+
+
+def _append(manifest: Path, out: Path) -> list[str]:
+    """Append the manifest's new bags to ``out``; the URIs of the bags the plan adds."""
+    config = _append_config(manifest, out)
     plan = plan_run(config)
     added = [r.bag_uri for r in plan.requests] + [e.bag_uri for e in plan.reused]  # reused: staged already
     if added:
@@ -107,14 +111,8 @@ def test_an_append_planned_before_another_run_appended_is_refused_and_its_rerun_
     _append(manifest, out)
     write_episode_bag(bags / "new", "mcap", SPEC)
     manifest.write_text(f"bags:\n  - uri: {bags / 'old'}\n  - uri: {bags / 'new'}\n")
-    config = ConvertConfig(
-        manifest=str(manifest),
-        contract=str(SAMPLE_CONTRACT),
-        output=str(out),
-        staging=str(tmp_path / "late.staging"),  # each run its own staging store, as two machines would
-        encoder=FAST_CODEC,
-        append=True,
-    )
+    # each run its own staging store, as two machines would
+    config = _append_config(manifest, out).model_copy(update={"staging": str(tmp_path / "late.staging")})
     late = plan_run(config)
     assert late.dataset_episodes == 1
     staged = stage_all(late)
@@ -131,13 +129,7 @@ def test_an_append_with_other_encoder_settings_is_refused_before_anything_conver
     bag, manifest, out = _appended_once(tmp_path)
     write_episode_bag(bag.parent / "new", "mcap", SPEC)
     manifest.write_text(f"bags:\n  - uri: {bag}\n  - uri: {bag.parent / 'new'}\n")
-    config = ConvertConfig(
-        manifest=str(manifest),
-        contract=str(SAMPLE_CONTRACT),
-        output=str(out),
-        encoder={**FAST_CODEC, "crf": 28},
-        append=True,
-    )
+    config = _append_config(manifest, out).model_copy(update={"encoder": {**FAST_CODEC, "crf": 28}})
     with pytest.raises(
         DatasetWriteError,
         match=r"observation\.images\.\w+ encoder: video\.crf 18 -> 28.*nothing was converted",
@@ -167,13 +159,7 @@ def test_staged_episodes_a_run_killed_after_its_commit_left_are_removed_by_the_n
     left = _staged(out)
     assert len(left) == 1 and left[0].startswith("other-")
     assert dataset_bags(str(out)).newest_staged == set(left)
-    config = ConvertConfig(
-        manifest=str(manifest),
-        contract=str(SAMPLE_CONTRACT),
-        output=str(out),
-        encoder=FAST_CODEC,
-        append=True,
-    )
+    config = _append_config(manifest, out)
     kept = plan_run(config.model_copy(update={"keep_staging": True}))
     assert kept.staging_removed == () and _staged(out) == left
     plan = plan_run(config)
@@ -188,13 +174,7 @@ def test_a_run_that_kept_its_staging_keeps_it_through_later_appends(tmp_path: Pa
     manifest = tmp_path / "m.yaml"
     manifest.write_text(f"bags:\n  - uri: {bag}\n")
     out = tmp_path / "ds"
-    config = ConvertConfig(
-        manifest=str(manifest),
-        contract=str(SAMPLE_CONTRACT),
-        output=str(out),
-        encoder=FAST_CODEC,
-        append=True,
-    )
+    config = _append_config(manifest, out)
     kept = plan_run(config.model_copy(update={"keep_staging": True}))
     reduce_run(kept, stage_all(kept))
     staged = _staged(out)
@@ -216,10 +196,7 @@ def test_on_an_object_store_the_newest_run_s_staged_episodes_wait_for_a_later_ap
     manifest = tmp_path / "m.yaml"
     with moto_s3() as env:
         s3_bucket(env, "fleet")
-        config = ConvertConfig(
-            manifest=str(manifest), contract=str(SAMPLE_CONTRACT), output="s3://fleet/ds", encoder=FAST_CODEC,
-            append=True,
-        )  # fmt: skip
+        config = _append_config(manifest, "s3://fleet/ds")
         staging = url_to_fs(config.resolved_staging())
 
         def staged() -> list[str]:

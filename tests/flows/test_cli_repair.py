@@ -53,14 +53,19 @@ def _convert(root: Path, manifest: str, crash_at: str | None = None) -> subproce
     )  # fmt: skip
 
 
-def test_an_append_killed_mid_commit_is_reported_repaired_and_appended_once(tmp_path: Path) -> None:
-    (tmp_path / "tmp").mkdir()
+def _one_appended(root: Path) -> None:
+    """Bags ``a`` and ``b``, manifests ``one.yaml`` (a) and ``two.yaml`` (a, b), and ``a`` appended to ``ds``."""
+    (root / "tmp").mkdir()
     for i, name in enumerate(("a", "b")):
-        write_episode_bag(tmp_path / name, "mcap", EpisodeSpec(duration_s=0.6, seed=i, cameras=CAMERAS))
-    (tmp_path / "one.yaml").write_text("bags:\n  - uri: a\n")
-    (tmp_path / "two.yaml").write_text("bags:\n  - uri: a\n  - uri: b\n")
-    (tmp_path / "codec.yaml").write_text(yaml.safe_dump(FAST_CODEC))
-    assert _convert(tmp_path, "one.yaml").returncode == 0
+        write_episode_bag(root / name, "mcap", EpisodeSpec(duration_s=0.6, seed=i, cameras=CAMERAS))
+    (root / "one.yaml").write_text("bags:\n  - uri: a\n")
+    (root / "two.yaml").write_text("bags:\n  - uri: a\n  - uri: b\n")
+    (root / "codec.yaml").write_text(yaml.safe_dump(FAST_CODEC))
+    assert _convert(root, "one.yaml").returncode == 0
+
+
+def test_an_append_killed_mid_commit_is_reported_repaired_and_appended_once(tmp_path: Path) -> None:
+    _one_appended(tmp_path)
 
     killed = _convert(tmp_path, "two.yaml", crash_at="local.append.moved")
     assert killed.returncode == -signal.SIGKILL, killed.stderr[-2000:]
@@ -90,13 +95,7 @@ def test_an_append_killed_after_its_commit_leaves_staged_episodes_the_next_appen
 ) -> None:
     """Killed after the commit's last step, before the run removed its staged episodes: the dataset has the
     new episode; the next append (with nothing new) removes the leftovers and says so."""
-    (tmp_path / "tmp").mkdir()
-    for i, name in enumerate(("a", "b")):
-        write_episode_bag(tmp_path / name, "mcap", EpisodeSpec(duration_s=0.6, seed=i, cameras=CAMERAS))
-    (tmp_path / "one.yaml").write_text("bags:\n  - uri: a\n")
-    (tmp_path / "two.yaml").write_text("bags:\n  - uri: a\n  - uri: b\n")
-    (tmp_path / "codec.yaml").write_text(yaml.safe_dump(FAST_CODEC))
-    assert _convert(tmp_path, "one.yaml").returncode == 0
+    _one_appended(tmp_path)
     staging = tmp_path / "ds.staging" / "episodes"
 
     killed = _convert(tmp_path, "two.yaml", crash_at="local.append.cleaned")

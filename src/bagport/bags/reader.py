@@ -203,11 +203,12 @@ class RosbagsReader:
         if found is None or (found[0], found[1] + 1) == (start_ns, end_ns):
             return start_ns, end_ns, ()
         first_ns, last_ns = found
-        return first_ns, last_ns + 1, (
+        stale = (
             f"metadata.yaml gives the recording's log times as {start_ns}..{end_ns - 1} ns but its data files "
             f"hold messages from {first_ns} to {last_ns} ns: the data files' times are used (metadata.yaml was "
-            "written for another file of the recording, or edited; `ros2 bag reindex` rewrites it)",
+            "written for another file of the recording, or edited; `ros2 bag reindex` rewrites it)"
         )
+        return first_ns, last_ns + 1, (stale,)
 
     @property
     def transfer(self) -> TransferStats:

@@ -52,7 +52,7 @@ def _check_values(root: Path, episodes: int) -> None:
     was held, at the global index the episodes' metadata gives it."""
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
 
-    rows = pq.read_table(sorted((root / "meta/provenance").rglob("*.parquet"))).to_pylist()
+    rows = pq.read_table(sorted((root / "meta/provenance").glob("chunk-*/file-*.parquet"))).to_pylist()
     state = {
         (r["episode_index"], r["frame_index"]): (r["index"], r["source_header_ns"])
         for r in rows

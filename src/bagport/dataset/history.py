@@ -9,6 +9,7 @@ from typing import Any
 import pandas as pd
 from fsspec.core import url_to_fs
 
+from bagport.dataset.bags_index import BAGS_SCHEMA, bag_rows
 from bagport.dataset.base import read_base, record_head, record_string, record_tail
 from bagport.dataset.checksums import latest_record
 from bagport.dataset.layout import (
@@ -58,33 +59,23 @@ class DatasetBags:
 
 
 def dataset_bags(root: str) -> DatasetBags:
-    """The bags of every run record of the dataset at ``root``: kept (an episode in the dataset) or left
-    out. A bag left out converts again once its files change (another stamp), or when its failure was not
-    its own (recorded without a stamp: a transient I/O error)."""
+    """The bags of every run of the dataset at ``root`` (its bags table, then the records it does not cover:
+    :mod:`bagport.dataset.bags_index`): kept (an episode in the dataset) or left out. A bag left out
+    converts again once its files change (another stamp), or when its failure was not its own (recorded
+    without a stamp: a transient I/O error)."""
     fs, path = url_to_fs(root)
+    rows, runs = bag_rows(fs, path.rstrip("/"))
+    newest = runs[-1] if runs else None
     bags = DatasetBags()
-    records = [str(p) for p in fs.glob(f"{path.rstrip('/')}/meta/provenance/run*.json")]
-    newest = latest_record(records)
-    for record_path in records:
-        with fs.open(record_path, "r", encoding="utf-8") as handle:
-            record = json.load(handle)
-        windows = record.get("manifest", {}).get("windows")  # by manifest entry; absent in older records
-        removable = record.get("keep_staging") is False  # older records say nothing: kept
-        staged = bags.newest_staged if record_path == newest else bags.committed_staged
-        for episode in record.get("episodes", []):
-            stamps = bags.kept.setdefault((str(episode["bag_uri"]), _window_of(episode, windows)), {})
-            stamps[str(episode.get("source_stamp", ""))] = str(episode.get("bag_fingerprint", ""))
-            if removable and episode.get("staged_episode_id"):
-                staged.add(str(episode["staged_episode_id"]))
-        for excluded in record.get("excluded", []):
-            window = _window_of(excluded, windows)
-            bags.left_out.add((str(excluded["bag_uri"]), window, str(excluded.get("source_stamp", ""))))
+    columns = [rows.column(name).to_pylist() for name in BAGS_SCHEMA.names]
+    for run, kind, uri, window, stamp, fingerprint, staged_id, removable in zip(*columns, strict=True):
+        if kind == "left_out":
+            bags.left_out.add((uri, window, stamp))
+            continue
+        bags.kept.setdefault((uri, window), {})[stamp] = fingerprint
+        if removable and staged_id:
+            (bags.newest_staged if run == newest else bags.committed_staged).add(staged_id)
     return bags
-
-
-def _window_of(entry: dict[str, Any], windows: dict[str, str] | None) -> str | None:
-    """A record entry's manifest window (``""``: the whole bag; ``None``: a record that keeps none)."""
-    return None if windows is None else windows.get(str(entry.get("manifest_entry")), "")
 
 
 def dataset_report(root: str) -> DatasetReport:

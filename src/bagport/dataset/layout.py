@@ -6,6 +6,7 @@ from collections.abc import Callable, Sequence
 
 __all__ = [
     "APPEND_RUN_RECORD_PATH",
+    "BAGS_INDEX_PATH",
     "CODEBASE_VERSION",
     "DATA_PATH",
     "DEFAULT_FEATURES",
@@ -36,6 +37,8 @@ VIDEO_PATH = "videos/{video_key}/" + CHUNK_FILE + ".mp4"
 PROVENANCE_PATH = "meta/provenance/" + CHUNK_FILE + ".parquet"
 RUN_RECORD_PATH = "meta/provenance/run.json"
 APPEND_RUN_RECORD_PATH = "meta/provenance/run-{run:03d}.json"
+BAGS_INDEX_PATH = "meta/provenance/bags.parquet"
+"""Every run's bags in one table (bagport.dataset.bags_index): an append reads it, not every run record."""
 JOURNAL_PATH = ".bagport-journal.json"
 """While a publish or append commits: its intent record (see bagport.dataset.journal)."""
 STAGED_DIR = ".bagport-staged-{run_id}"

@@ -7,8 +7,13 @@ from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import pyarrow as pa
+from fsspec.core import url_to_fs
+
+from bagport.dataset.bags_index import bag_rows, record_rows, write_bags_index
 from bagport.dataset.base import DatasetBase
 from bagport.dataset.checksums import run_checksums
+from bagport.dataset.layout import BAGS_INDEX_PATH
 from bagport.dataset.provenance import episode_provenance, run_record_path, write_run_record
 from bagport.dataset.qa import write_qa
 from bagport.qa import QAEntry
@@ -62,9 +67,37 @@ def finish_meta(
         if entries
         else None
     )
+    _write_bags(root, base, summaries, run_record)  # before the checksums, which cover it
     carried = {} if base is None else base.checksums
     record_rel = run_record_path(base)
     tail = run_checksums(root, record_rel, carried, written)
     episodes = (episode_provenance(s, i) for i, s in enumerate(summaries, plan.first_episode))
     write_run_record(root / record_rel, run_record, episodes, tail)
     return entries, qa_report
+
+
+def _write_bags(
+    root: Path, base: DatasetBase | None, summaries: Sequence[EpisodeSummary], run_record: dict[str, Any]
+) -> None:
+    """The bags table (:mod:`bagport.dataset.bags_index`): the dataset's rows so far and this run's."""
+    run = base.run_number if base is not None else 0
+    this_run = {
+        "manifest": run_record.get("manifest", {}),
+        "keep_staging": run_record.get("keep_staging"),
+        "episodes": [
+            {
+                "bag_uri": s.bag_uri,
+                "manifest_entry": s.manifest_entry,
+                "source_stamp": s.source_stamp,
+                "bag_fingerprint": s.bag_fingerprint,
+                "staged_episode_id": s.episode_id,
+            }
+            for s in summaries
+        ],
+        "excluded": run_record.get("excluded", []),
+    }
+    rows = [record_rows(this_run, run)]
+    if base is not None:
+        fs, path = url_to_fs(base.root)
+        rows.insert(0, bag_rows(fs, path.rstrip("/"))[0])
+    write_bags_index(root / BAGS_INDEX_PATH, pa.concat_tables(rows), run)

@@ -19,6 +19,7 @@ import statistics
 import sys
 import tempfile
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import yaml
@@ -37,13 +38,13 @@ from bagport.run import plan_run, stage_all  # noqa: E402
 from bench.workloads import WORKLOADS, ensure_workload  # noqa: E402
 
 
-def _one_append(work: Path) -> Path:
-    """A dataset made by one --append of 20 of W4's bags; its root."""
-    w4 = ensure_workload(WORKLOADS["W4"], REPO / "bench/.data")
+def _one_append(work: Path, bags: int) -> Path:
+    """A dataset made by one --append of ``bags`` bags of W4's shape; its root."""
+    workload = ensure_workload(replace(WORKLOADS["W4"], episodes=bags), work)
     manifest = work / "m.yaml"
-    manifest.write_text("bags:\n" + "".join(f"  - uri: {w4 / f'ep{i:04d}'}\n" for i in range(20)))
+    manifest.write_text("bags:\n" + "".join(f"  - uri: {p}\n" for p in sorted(workload.glob("ep*"))))
     config = ConvertConfig(
-        manifest=str(manifest), contract=str(w4 / "contract.yaml"), output=str(work / "ds"),
+        manifest=str(manifest), contract=str(workload / "contract.yaml"), output=str(work / "ds"),
         encoder=yaml.safe_load((REPO / "configs/codecs/h264-fast.yaml").read_text()), append=True,
         on_qa_fail="keep",
     )  # fmt: skip
@@ -75,28 +76,54 @@ def _timed(root: Path) -> tuple[float, int]:
     return statistics.median(times), kept
 
 
+@dataclass(frozen=True, slots=True)
+class HistoryRow:
+    runs: int
+    episodes: int
+    records_mb: float
+    records_s: float
+    table_s: float
+    table_mb: float
+
+    def markdown(self) -> str:
+        return (
+            f"| {self.runs} | {self.episodes} | {self.records_mb:.1f} | {self.records_s:.3f} | "
+            f"{self.table_s:.3f} | {self.table_mb:.2f} |"
+        )
+
+
+def measure(work: Path, runs: list[int], bags: int = 20) -> list[HistoryRow]:
+    """The plan's read for each history length (``runs`` records of ``bags`` episodes each), both ways."""
+    root = _one_append(work, bags)
+    out = []
+    for count in runs:
+        _history(root, count)
+        records_mb = sum(p.stat().st_size for p in (root / "meta/provenance").glob("run*.json")) / 1e6
+        records_s, kept = _timed(root)
+        rows, numbers = bag_rows(LocalFileSystem(), str(root))
+        write_bags_index(root / BAGS_INDEX_PATH, rows, numbers[-1])
+        table_s, kept_table = _timed(root)
+        if kept_table != kept:
+            raise AssertionError(f"the table holds {kept_table} bags, the records {kept}")
+        table_mb = (root / BAGS_INDEX_PATH).stat().st_size / 1e6
+        out.append(HistoryRow(count, kept, records_mb, records_s, table_s, table_mb))
+    return out
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--runs", default="100,1000,4000")
     parser.add_argument("--work", type=Path, default=None)
     args = parser.parse_args()
     work = args.work or Path(tempfile.mkdtemp(prefix="bagport-history-"))
-    root = _one_append(work)
     print(f"machine: {os.cpu_count()} cores, load {os.getloadavg()[0]:.2f}")
+    rows = measure(work, [int(r) for r in args.runs.split(",")])
     print(
         "| run records | episodes | records MB | plan's read, records only s | with bags.parquet s | table MB |"
     )
     print("|---|---|---|---|---|---|")
-    for runs in (int(r) for r in args.runs.split(",")):
-        _history(root, runs)
-        records_mb = sum(p.stat().st_size for p in (root / "meta/provenance").glob("run*.json")) / 1e6
-        records_s, kept = _timed(root)
-        rows, numbers = bag_rows(LocalFileSystem(), str(root))
-        write_bags_index(root / BAGS_INDEX_PATH, rows, numbers[-1])
-        table_s, kept_table = _timed(root)
-        assert kept_table == kept
-        table_mb = (root / BAGS_INDEX_PATH).stat().st_size / 1e6
-        print(f"| {runs} | {kept} | {records_mb:.1f} | {records_s:.3f} | {table_s:.3f} | {table_mb:.2f} |")
+    for row in rows:
+        print(row.markdown())
     if args.work is None:
         shutil.rmtree(work, ignore_errors=True)
 

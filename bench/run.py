@@ -1,6 +1,7 @@
 """`make bench`: bagport vs the LeRobot-writer baseline vs the codec floor, on W1/W2/W3; W4, a fleet of
 2,000 one-second bags, converted once and re-run (``bench/fleet.py``); REDUCE, the reduce as a map
-(``bench/reduce_map.py``: appends against the dataset's size, the commit's memory, W1's reduce on Dask).
+(``bench/reduce_map.py``: appends against the dataset's size, the commit's memory, W1's reduce on Dask);
+HISTORY, an append's plan against the dataset's history (``bench/append_history.py``, printed).
 
 Each tool runs as a fresh process tree on the same generated bags; wall time, CPU seconds (the
 tree's, from the kernel's child accounting), peak RSS of the whole tree (sampled every 0.2 s) and
@@ -207,7 +208,10 @@ def _parser() -> argparse.ArgumentParser:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument(
-        "--workloads", default="W1,W2,W3,W4,REDUCE", help="REDUCE: the reduce as a map (bench/reduce_map.py)"
+        "--workloads",
+        default="W1,W2,W3,W4,REDUCE,HISTORY",
+        help="REDUCE: the reduce as a map (bench/reduce_map.py); HISTORY: an append's plan against the "
+        "dataset's history (bench/append_history.py, printed)",
     )
     parser.add_argument("--tools", default=",".join(TOOLS))
     parser.add_argument("--runs", type=int, default=3)
@@ -282,6 +286,9 @@ def main() -> None:
                 str(args.report),
             ]
             subprocess.run(script, check=True, cwd=REPO)
+            continue
+        if name == "HISTORY":  # the plan's read of a dataset's bags, from its records and from bags.parquet
+            subprocess.run([sys.executable, str(BENCH / "append_history.py")], check=True, cwd=REPO)
             continue
         earlier = results["workloads"].get(name, {})
         results["workloads"][name] = _workload_result(name, tools, args, earlier)

@@ -158,10 +158,15 @@ def test_staged_episodes_a_run_killed_after_its_commit_left_are_removed_by_the_n
         assert _append(manifest, out) == [str(other)]
     left = _staged(out)
     assert len(left) == 1 and left[0].startswith("other-")
-    assert dataset_bags(str(out)).newest_staged == set(left)
+    assert {staged_id for staged_id, _ in dataset_bags(str(out)).newest_staged} == set(left)
     config = _append_config(manifest, out)
     kept = plan_run(config.model_copy(update={"keep_staging": True}))
     assert kept.staging_removed == () and _staged(out) == left
+    summary = Path(f"{out}.staging") / "episodes" / left[0] / "episode.json"
+    recorded = summary.read_text()
+    summary.write_text(recorded.replace('"source_stamp": "', '"source_stamp": "another-recording-'))
+    assert plan_run(config).staging_removed == () and _staged(out) == left  # another recording's: kept
+    summary.write_text(recorded)
     plan = plan_run(config)
     assert plan.staging_removed == tuple(left) and not plan.requests and _staged(out) == []
     assert "removed 1 staged episode(s)" in plan.staging_note()

@@ -47,17 +47,27 @@ def _storages(reader: Any) -> Iterator[Any]:
             yield sub.storage
 
 
+def _timestamp_indexed(conn: Any) -> bool:
+    """Whether an index of ``messages`` starts with ``timestamp`` (rosbag2's ``timestamp_idx``), so its
+    least and greatest value are each one lookup."""
+    for row in conn.execute("PRAGMA index_list(messages)"):
+        name = str(row[1]).replace('"', '""')
+        columns = [info[2] for info in conn.execute(f'PRAGMA index_info("{name}")')]
+        if columns[:1] == ["timestamp"]:
+            return True
+    return False
+
+
 def _sqlite_time_range(storage: Sqlite3Reader) -> tuple[int, int] | None:
-    """The first and last ``messages.timestamp`` (``(UNBOUNDED_NS, -1)``: no message), when an index on it
-    answers without a scan of the table; else ``None``."""
+    """The first and last ``messages.timestamp`` (``(UNBOUNDED_NS, -1)``: no message), when an index that
+    starts with it answers (two lookups: a single query of both reads the whole index); else ``None``."""
     if storage.dbconn is None:
         raise ValueError("the SQLite storage is closed")
-    indexed = storage.dbconn.execute(
-        "SELECT 1 FROM sqlite_master WHERE type = 'index' AND tbl_name = 'messages' AND sql LIKE '%timestamp%'"
-    ).fetchone()
-    if indexed is None:
+    if not _timestamp_indexed(storage.dbconn):
         return None
-    ((first, last),) = storage.dbconn.execute("SELECT MIN(timestamp), MAX(timestamp) FROM messages")
+    ((first, last),) = storage.dbconn.execute(
+        "SELECT (SELECT MIN(timestamp) FROM messages), (SELECT MAX(timestamp) FROM messages)"
+    )
     return (UNBOUNDED_NS, -1) if first is None else (int(first), int(last))
 
 

@@ -175,7 +175,8 @@ class RosbagsReader:
             counts[topic] = (msgtype, count + int(conn.msgcount))
         self._promised = {topic: count for topic, (_, count) in counts.items()}
         message_count = int(self._reader.message_count)
-        start_ns, end_ns, stale = self._times() if message_count else (0, 0, ())
+        listed_ns = (int(self._reader.start_time), int(self._reader.end_time)) if message_count else (0, 0)
+        start_ns, end_ns, stale = self._times(*listed_ns) if message_count else (0, 0, ())
         return BagInfo(
             uri=self._uri,
             storage=storage,
@@ -188,14 +189,15 @@ class RosbagsReader:
             custom_data=_custom_data(path),
             checksums=bag_checksums(storage, plan.data_files),
             warnings=(*plan.warnings, *self._reader.warnings(), *stale),
+            listed_span_ns=listed_ns if stale else None,
         )
 
-    def _times(self) -> tuple[int, int, tuple[str, ...]]:
+    def _times(self, start_ns: int, end_ns: int) -> tuple[int, int, tuple[str, ...]]:
         """The bag's first log time and one past its last, from its data files' indexes where they say
         (:func:`index_time_range`), with a warning when ``metadata.yaml`` says otherwise: windows
         (``start_s``/``end_s``) and a whole-bag episode count from these times, so stale metadata (the real
-        ``wbag``'s covers only the last of its five files) must not cut the recording short."""
-        start_ns, end_ns = int(self._reader.start_time), int(self._reader.end_time)
+        ``wbag``'s covers only the last of its five files) must not cut the recording short. ``start_ns``,
+        ``end_ns``: the times rosbags gives (``metadata.yaml``'s for a rosbag2 folder)."""
         try:
             found = index_time_range(self._reader)
         except STORAGE_ERRORS:

@@ -61,6 +61,10 @@ class BagInfo:
     """What was odd about the bag and how it was read anyway (e.g. a stale metadata.yaml)."""
     checksums: Checksums | None = None
     """Whether reads are checked against the recorder's checksums (``None``: not determined)."""
+    listed_span_ns: tuple[int, int] | None = None
+    """``(start_ns, end_ns)`` as ``metadata.yaml`` gives them, when they differ from the data files' own
+    (:attr:`start_ns`, :attr:`end_ns`); the bag's fingerprint hashes these, as it did before bagport read
+    the times from the data files, so a dataset's recorded fingerprints still match."""
 
     @property
     def duration_ns(self) -> int:

@@ -63,9 +63,10 @@ class SqliteCut:
 
 
 def sqlite_cut(path: Path | RemotePath) -> SqliteCut | None:
-    """The cut of a file that starts as SQLite but is shorter than its header says (or is not whole pages);
-    ``None`` for a whole file, one that does not start as SQLite, or one whose header keeps no page count
-    (written by a SQLite older than 3.7.0: nothing to compare)."""
+    """The cut of a file that starts as SQLite but is shorter than its header says (without a page count in
+    its header, as a SQLite older than 3.7.0 leaves it: not whole pages); ``None`` for a whole file, a
+    longer one (damage, not a cut), one that does not start as SQLite, or one with a write-ahead log
+    beside it (pages not yet checkpointed into it)."""
     size = path.stat().st_size
     with path.open("rb") as handle:
         header = handle.read(_HEADER_BYTES)
@@ -82,8 +83,16 @@ def sqlite_cut(path: Path | RemotePath) -> SqliteCut | None:
     (pages,) = _COUNTER.unpack_from(header, 28)
     (valid_for,) = _COUNTER.unpack_from(header, 92)
     expected = pages * page_size if pages and counter == valid_for else None
-    if expected is not None and size < expected:
-        return SqliteCut(path.name, size, expected, page_size)
-    if size % page_size:
-        return SqliteCut(path.name, size, expected, page_size)
-    return None
+    if _has_wal(path):
+        return None  # a recorder killed mid-checkpoint leaves pages in the WAL: not a cut
+    if expected is not None:
+        return SqliteCut(path.name, size, expected, page_size) if size < expected else None
+    return SqliteCut(path.name, size, None, page_size) if size % page_size else None
+
+
+def _has_wal(path: Path | RemotePath) -> bool:
+    """Whether the database's write-ahead log is beside it and not empty."""
+    if isinstance(path, RemotePath):
+        return False
+    wal = path.with_name(f"{path.name}-wal")
+    return wal.is_file() and wal.stat().st_size > 0

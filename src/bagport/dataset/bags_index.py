@@ -61,8 +61,9 @@ def record_rows(record: Mapping[str, Any], run: int) -> pa.Table:
         columns["window"].append(
             None if windows is None else windows.get(str(entry.get("manifest_entry")), "")
         )
-        columns["source_stamp"].append(str(entry.get("source_stamp") or ""))
-        columns["bag_fingerprint"].append(str(entry.get("bag_fingerprint") or ""))
+        # as the records were read before the table: a stamp recorded as null is "None", never a bag's stamp
+        columns["source_stamp"].append(str(entry.get("source_stamp", "")))
+        columns["bag_fingerprint"].append(str(entry.get("bag_fingerprint", "")))
         columns["staged_episode_id"].append(str(entry.get("staged_episode_id") or ""))
         columns["removable"].append(removable)
     return pa.table(columns, schema=BAGS_SCHEMA)

@@ -40,13 +40,13 @@ class DatasetBags:
     """Bags with an episode in the dataset: ``{(URI, window): {source stamp: bag fingerprint}}``."""
     left_out: set[tuple[str, str | None, str]] = field(default_factory=set)
     """Bags a run excluded (failed QA or conversion), with the stamp of the files then."""
-    committed_staged: set[str] = field(default_factory=set)
-    """The staged episode ids of the dataset's episodes, from the runs that did not ``--keep-staging`` (older
-    records say nothing: kept) other than the newest: a staged episode still there under one of them was
-    left by a run killed after its commit."""
-    newest_staged: set[str] = field(default_factory=set)
-    """The same of the newest run, which may still be finishing (other formats read its staged episodes
-    after its commit) unless the output's recovery found no live write."""
+    committed_staged: set[tuple[str, str]] = field(default_factory=set)
+    """``(staged episode id, source stamp)`` of the dataset's episodes, from the runs that did not ``--keep-staging`` (older
+    records say nothing: kept) other than the newest that added episodes: a staged episode still there under
+    one of them was left by a run killed after its commit."""
+    newest_staged: set[tuple[str, str]] = field(default_factory=set)
+    """The same of the newest run that added episodes, which may still be finishing (other formats read its
+    staged episodes after its commit) unless the output's recovery found no live write."""
 
     def kept_as(self, uri: str, window: str) -> dict[str, str] | None:
         """The stamps and fingerprints the bag's window was appended with, or ``None`` when it was not."""
@@ -64,17 +64,19 @@ def dataset_bags(root: str) -> DatasetBags:
     converts again once its files change (another stamp), or when its failure was not its own (recorded
     without a stamp: a transient I/O error)."""
     fs, path = url_to_fs(root)
-    rows, runs = bag_rows(fs, path.rstrip("/"))
-    newest = runs[-1] if runs else None
+    rows = bag_rows(fs, path.rstrip("/"))[0]
     bags = DatasetBags()
-    columns = [rows.column(name).to_pylist() for name in BAGS_SCHEMA.names]
+    columns: list[list[Any]] = [rows.column(name).to_pylist() for name in BAGS_SCHEMA.names]
+    # the newest run that added episodes (a later one that only recorded exclusions staged nothing)
+    added = [run for run, kind in zip(columns[0], columns[1], strict=True) if kind == "kept"]
+    newest = max(added) if added else None
     for run, kind, uri, window, stamp, fingerprint, staged_id, removable in zip(*columns, strict=True):
         if kind == "left_out":
             bags.left_out.add((uri, window, stamp))
             continue
         bags.kept.setdefault((uri, window), {})[stamp] = fingerprint
         if removable and staged_id:
-            (bags.newest_staged if run == newest else bags.committed_staged).add(staged_id)
+            (bags.newest_staged if run == newest else bags.committed_staged).add((staged_id, stamp))
     return bags
 
 

@@ -76,7 +76,8 @@ def bag_fingerprint(info: BagInfo) -> str:
     the payload bytes (that would cost a full read of multi-GB files).
     """
     digest = hashlib.sha256()
-    parts = [info.storage, *info.files, str(info.size_bytes), str(info.start_ns), str(info.end_ns)]
+    start_ns, end_ns = info.listed_span_ns or (info.start_ns, info.end_ns)
+    parts = [info.storage, *info.files, str(info.size_bytes), str(start_ns), str(end_ns)]
     parts += [f"{t.name}:{t.msgtype}:{t.count}" for t in sorted(info.topics, key=lambda t: t.name)]
     for part in parts:
         digest.update(part.encode())

@@ -28,7 +28,7 @@ from pydantic import JsonValue
 from bagport import __version__
 from bagport.errors import DatasetWriteError
 from bagport.request import EpisodeRequest
-from bagport.staging import EPISODE_SUMMARY, EpisodeSummary, episode_dir, staged_path
+from bagport.staging import EPISODE_SUMMARY, EpisodeSummary, episode_dir, read_summary, staged_path
 from bagport.uris import is_local
 
 __all__ = [
@@ -133,10 +133,12 @@ def list_staged(staging_uri: str) -> frozenset[str]:
     return frozenset(str(marker).rstrip("/").rsplit("/", 2)[-2] for marker in markers)
 
 
-def remove_finished_staging(staging_uri: str, finished: Collection[str]) -> tuple[str, ...]:
-    """Remove the staged episodes (complete or not) whose ids are in ``finished``: episodes a dataset holds
-    already (:attr:`bagport.dataset.history.DatasetBags.committed_staged`), which a run killed after its
-    commit left behind. One listing of the store; the ids removed, sorted."""
+def remove_finished_staging(staging_uri: str, finished: Collection[tuple[str, str]]) -> tuple[str, ...]:
+    """Remove the staged episodes a dataset holds already, which a run killed after its commit left behind:
+    ``finished`` holds ``(staged episode id, source stamp)`` of the dataset's episodes
+    (:attr:`bagport.dataset.history.DatasetBags.committed_staged`); a staged episode goes when its summary
+    has one of those stamps (one with the same id but another stamp is another recording of the bag, staged
+    by a run that did not commit: the next run uses it). One listing of the store; the ids removed, sorted."""
     if not finished:
         return ()
     fs, root = url_to_fs(episode_dir(staging_uri, ""))
@@ -145,10 +147,14 @@ def remove_finished_staging(staging_uri: str, finished: Collection[str]) -> tupl
         names = {str(p).rstrip("/").rsplit("/", 1)[-1] for p in fs.ls(root, detail=False)}
     except (FileNotFoundError, NotADirectoryError):
         return ()
-    removed = sorted(names & set(finished))
-    for episode_id in removed:
+    removed = []
+    for episode_id in sorted(names & {staged_id for staged_id, _ in finished}):
+        summary = read_summary(episode_dir(staging_uri, episode_id))
+        if summary is None or (episode_id, summary.source_stamp) not in finished:
+            continue
         with contextlib.suppress(FileNotFoundError):  # another run removing it too
             fs.rm(staged_path(root, episode_id), recursive=True)
+        removed.append(episode_id)
     return tuple(removed)
 
 

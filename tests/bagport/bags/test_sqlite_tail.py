@@ -119,3 +119,15 @@ def test_the_salvage_the_fix_gives_makes_a_bag_that_converts(bag: Path, tmp_path
         kept = [(m.topic, m.log_time_ns, m.raw_size, m.header_stamp_ns()) for m in salvaged.messages()]
         first = [(m.topic, m.log_time_ns, m.raw_size, m.header_stamp_ns()) for m in original.messages()]
     assert set(kept) <= set(first)  # the rows kept are recorded ones (topic, time, size, stamp)
+
+
+def test_a_longer_file_or_one_with_a_write_ahead_log_is_not_called_cut(bag: Path, tmp_path: Path) -> None:
+    """Bytes past the header's length are damage, not a cut; a log beside the file holds pages a recorder
+    killed mid-checkpoint had not written into it yet."""
+    data = (bag / "ep.db3").read_bytes()
+    longer = tmp_path / "longer.db3"
+    longer.write_bytes(data + b"\0" * 100)
+    assert sqlite_cut(longer) is None
+    cut = _cut_copy(bag, tmp_path / "ep", len(data) // 2)
+    (cut / "ep.db3-wal").write_bytes(b"\0" * 32)
+    assert sqlite_cut(cut / "ep.db3") is None

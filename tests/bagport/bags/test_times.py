@@ -14,6 +14,7 @@ import yaml
 
 from bagport.bags import open_bag
 from bagport.episode import convert_episode
+from bagport.episode.checks import bag_fingerprint
 from bagport.synth import EpisodeSpec, write_episode_bag
 from bagport.synth.write import SynthStorage
 from bagport.timewindow import TimeWindow
@@ -54,6 +55,10 @@ def test_a_window_of_a_bag_with_stale_metadata_converts_as_with_true_metadata(
     stale = _stale_copy(bag, tmp_path / "stale" / "ep", NS)
     with open_bag(str(bag)) as true, open_bag(str(stale)) as edited:
         assert (edited.info.start_ns, edited.info.end_ns) == (true.info.start_ns, true.info.end_ns)
+        # the fingerprint hashes the listed times, as before: fingerprints recorded in datasets still match
+        assert edited.info.listed_span_ns == (true.info.start_ns + NS, true.info.end_ns)
+        listed = replace(edited.info, start_ns=true.info.start_ns + NS, listed_span_ns=None)
+        assert bag_fingerprint(edited.info) == bag_fingerprint(listed) != bag_fingerprint(true.info)
         assert not [w for w in true.info.warnings if "metadata.yaml gives" in w]
         assert [w for w in edited.info.warnings if "metadata.yaml gives" in w]
     window = TimeWindow(start_s=0.0, end_s=1.0)  # the first second: before the stale metadata's start

@@ -78,6 +78,9 @@ def test_the_table_says_what_the_records_say_and_only_later_records_are_read(
     assert read == [2]  # the exclusion's record only: runs 0 and 1 come from the table
     assert known == _from_records(tmp_path / "ds", monkeypatch)
     assert len(known.kept) == 3 and len(known.left_out) == 1
+    # the newest run that added episodes is run 1 (b), not the exclusions' run 2
+    assert {staged_id.split("-")[0] for staged_id, _ in known.newest_staged} == {"b"}
+    assert {staged_id.split("-")[0] for staged_id, _ in known.committed_staged} == {"a"}
     assert {uri for uri, _, _ in known.left_out} == {str(short)}
 
     plan = plan_run(_config(tmp_path))

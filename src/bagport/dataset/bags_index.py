@@ -12,7 +12,6 @@ its records on top, so the table is never the only source: it is the records' ca
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -21,9 +20,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from fsspec import AbstractFileSystem
 
-from bagport.dataset.layout import BAGS_INDEX_PATH
+from bagport.dataset.layout import BAGS_INDEX_PATH, run_number
 
-__all__ = ["BAGS_SCHEMA", "bag_rows", "record_rows", "run_of", "write_bags_index"]
+__all__ = ["BAGS_SCHEMA", "bag_rows", "record_rows", "write_bags_index"]
 
 _FIELDS: list[tuple[str, pa.DataType]] = [
     ("run", pa.int64()),
@@ -37,13 +36,6 @@ _FIELDS: list[tuple[str, pa.DataType]] = [
 ]
 BAGS_SCHEMA = pa.schema(_FIELDS)
 _COVERED = b"bagport.covered_run"
-_RUN = re.compile(r"run(?:-(\d+))?\.json")
-
-
-def run_of(record_path: str) -> int | None:
-    """The run number of a run record's path (``run.json``: 0, ``run-007.json``: 7), else ``None``."""
-    match = _RUN.fullmatch(record_path.rsplit("/", 1)[-1])
-    return int(match.group(1) or 0) if match else None
 
 
 def record_rows(record: Mapping[str, Any], run: int) -> pa.Table:
@@ -87,7 +79,7 @@ def bag_rows(fs: AbstractFileSystem, root: str) -> tuple[pa.Table, list[int]]:
     records = {
         run: str(path)
         for path in fs.glob(f"{root}/meta/provenance/run*.json")
-        if (run := run_of(str(path))) is not None
+        if (run := run_number(str(path))) is not None
     }
     tables: list[pa.Table] = []
     covered = -1

@@ -10,25 +10,22 @@ touches. The newest record is the one to check: older ones describe ``meta/`` as
 from __future__ import annotations
 
 import json
-import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from bagport.dataset.journal import file_sha256
+from bagport.dataset.layout import run_number
 from bagport.errors import ValidationError
 
 __all__ = ["CHECKED_FOLDERS", "latest_record", "run_checksums", "verify_checksums"]
 
 CHECKED_FOLDERS = ("data", "videos", "meta")
-_RUN = re.compile(r"run(?:-(\d+))?\.json")
 
 
 def latest_record(names: list[str]) -> str | None:
     """Of run-record paths (``.../run.json``, ``.../run-001.json``...), the newest run's."""
-    numbered = [
-        (int(m.group(1) or 0), name) for name in names if (m := _RUN.fullmatch(name.rsplit("/", 1)[-1]))
-    ]
+    numbered = [(run, name) for name in names if (run := run_number(name)) is not None]
     return max(numbered)[1] if numbered else None
 
 

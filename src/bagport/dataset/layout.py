@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 
 __all__ = [
@@ -22,6 +23,7 @@ __all__ = [
     "TASKS_PATH",
     "VIDEO_PATH",
     "next_chunk_file",
+    "run_number",
     "rotate_files",
 ]
 
@@ -55,6 +57,15 @@ DEFAULT_FEATURES: dict[str, dict[str, object]] = {
     "index": {"dtype": "int64", "shape": [1], "names": None},
     "task_index": {"dtype": "int64", "shape": [1], "names": None},
 }
+
+
+_RUN_RECORD_NAME = re.compile(r"run(?:-(\d+))?\.json")
+
+
+def run_number(record_path: str) -> int | None:
+    """The run a run record's path names (``run.json``: 0, ``run-007.json``: 7), else ``None``."""
+    match = _RUN_RECORD_NAME.fullmatch(record_path.rsplit("/", 1)[-1])
+    return int(match.group(1) or 0) if match else None
 
 
 def next_chunk_file(chunk_index: int, file_index: int, chunks_size: int) -> tuple[int, int]:

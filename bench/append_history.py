@@ -100,8 +100,8 @@ def measure(work: Path, runs: list[int], bags: int = 20) -> list[HistoryRow]:
         _history(root, count)
         records_mb = sum(p.stat().st_size for p in (root / "meta/provenance").glob("run*.json")) / 1e6
         records_s, kept = _timed(root)
-        rows, numbers = bag_rows(LocalFileSystem(), str(root))
-        write_bags_index(root / BAGS_INDEX_PATH, rows, numbers[-1])
+        rows = bag_rows(LocalFileSystem(), str(root))
+        write_bags_index(root / BAGS_INDEX_PATH, rows, count - 1)  # run.json is run 0
         table_s, kept_table = _timed(root)
         if kept_table != kept:
             raise AssertionError(f"the table holds {kept_table} bags, the records {kept}")

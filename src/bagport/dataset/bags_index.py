@@ -73,9 +73,9 @@ def _read_index(fs: AbstractFileSystem, root: str) -> tuple[pa.Table, int] | Non
         return None
 
 
-def bag_rows(fs: AbstractFileSystem, root: str) -> tuple[pa.Table, list[int]]:
+def bag_rows(fs: AbstractFileSystem, root: str) -> pa.Table:
     """Every bag row of the dataset at ``root`` (an fsspec path): the table's, then those of the run records
-    it does not cover (read one by one); and the run numbers of all its records, in order."""
+    it does not cover (read one by one)."""
     records = {
         run: str(path)
         for path in fs.glob(f"{root}/meta/provenance/run*.json")
@@ -90,8 +90,7 @@ def bag_rows(fs: AbstractFileSystem, root: str) -> tuple[pa.Table, list[int]]:
     for run in sorted(r for r in records if r > covered):
         with fs.open(records[run], "r", encoding="utf-8") as handle:
             tables.append(record_rows(json.load(handle), run))
-    rows = pa.concat_tables(tables) if tables else BAGS_SCHEMA.empty_table()
-    return rows, sorted(records)
+    return pa.concat_tables(tables) if tables else BAGS_SCHEMA.empty_table()
 
 
 def write_bags_index(path: Path, rows: pa.Table, covered_run: int) -> None:

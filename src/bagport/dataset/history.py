@@ -64,7 +64,7 @@ def dataset_bags(root: str) -> DatasetBags:
     converts again once its files change (another stamp), or when its failure was not its own (recorded
     without a stamp: a transient I/O error)."""
     fs, path = url_to_fs(root)
-    rows = bag_rows(fs, path.rstrip("/"))[0]
+    rows = bag_rows(fs, path.rstrip("/"))
     bags = DatasetBags()
     columns: list[list[Any]] = [rows.column(name).to_pylist() for name in BAGS_SCHEMA.names]
     # the newest run that added episodes (a later one that only recorded exclusions staged nothing)

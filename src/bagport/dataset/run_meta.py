@@ -99,5 +99,5 @@ def _write_bags(
     rows = [record_rows(this_run, run)]
     if base is not None:
         fs, path = url_to_fs(base.root)
-        rows.insert(0, bag_rows(fs, path.rstrip("/"))[0])
+        rows.insert(0, bag_rows(fs, path.rstrip("/")))
     write_bags_index(root / BAGS_INDEX_PATH, pa.concat_tables(rows), run)

@@ -16,7 +16,7 @@ from typing import Any
 from bagport.bags import open_bag
 from bagport.config import ConvertConfig
 from bagport.contract import ContractPlan, FeatureKind
-from bagport.dataset.base import read_base
+from bagport.dataset.base import read_info
 from bagport.dataset.history import DatasetBags
 from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.episode.checks import bag_fingerprint
@@ -33,7 +33,7 @@ def check_append_fits(config: ConvertConfig, contract: ContractPlan, *, adding: 
     every bag): other keys, fps or robot type, or a camera the dataset encoded with other settings (the
     same keys the commit compares). A vector's shape and names are known from the bags only: the commit
     checks them. An append with nothing new writes nothing, and is not refused. The dataset's episodes."""
-    info = read_base(config.output).info
+    info = read_info(config.output)
     differences = _differences(info, contract, EncoderSettings.from_dict(config.encoder)) if adding else []
     if not differences:
         return int(info["total_episodes"])

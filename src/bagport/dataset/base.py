@@ -26,7 +26,7 @@ from bagport.dataset.sketches import DatasetSketches, read_sketches
 from bagport.errors import DatasetWriteError
 from bagport.stats import FeatureStats, stats_from_json
 
-__all__ = ["DatasetBase", "read_base", "record_head", "record_string", "record_tail"]
+__all__ = ["DatasetBase", "read_base", "read_info", "record_head", "record_string", "record_tail"]
 
 _CHUNK_FILE = re.compile(r"chunk-(\d+)/file-(\d+)\.\w+$")
 
@@ -132,16 +132,26 @@ def record_string(raw: bytes, key: str) -> str | None:
     return value if isinstance(value, str) else None
 
 
-def read_base(root: str | Path) -> DatasetBase:
-    """Read what an append needs from the dataset at ``root`` (a local path or fsspec URI)."""
+def read_info(root: str | Path) -> dict[str, Any]:
+    """The ``meta/info.json`` of the dataset at ``root`` (a local path or fsspec URI) alone: what an append's
+    plan and the commit's re-check need, without the rest :func:`read_base` reads (stats, sketches, tasks,
+    the newest run record). A folder without one is not a LeRobot dataset: refused."""
     fs, path = url_to_fs(str(root))
-    path = path.rstrip("/")
-    if not fs.isfile(f"{path}/{INFO_PATH}"):
+    try:
+        info: dict[str, Any] = _read_json(fs, f"{path.rstrip('/')}/{INFO_PATH}")
+    except FileNotFoundError:
         raise DatasetWriteError(
             f"{root} is not a LeRobot dataset (no {INFO_PATH}); nothing was written. Fix: point --output at the "
             "dataset to append to, or write a new dataset to a new --output (without --append)."
-        )
-    info = _read_json(fs, f"{path}/{INFO_PATH}")
+        ) from None
+    return info
+
+
+def read_base(root: str | Path) -> DatasetBase:
+    """Read what an append needs from the dataset at ``root`` (a local path or fsspec URI)."""
+    info = read_info(root)
+    fs, path = url_to_fs(str(root))
+    path = path.rstrip("/")
     raw_histograms = (
         _read_json(fs, f"{path}/{HISTOGRAMS_PATH}") if fs.isfile(f"{path}/{HISTOGRAMS_PATH}") else {}
     )

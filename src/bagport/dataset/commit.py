@@ -7,7 +7,6 @@ It never opens a data or video file: the placements, task counts, sizes and dige
 
 from __future__ import annotations
 
-import json
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -17,12 +16,11 @@ import numpy as np
 import numpy.typing as npt
 from fsspec.core import url_to_fs
 
-from bagport.dataset.base import DatasetBase
+from bagport.dataset.base import DatasetBase, read_info
 from bagport.dataset.crashpoints import reached
 from bagport.dataset.data_files import DataPlacement
 from bagport.dataset.files import WrittenFile
 from bagport.dataset.free_memory import release_unused_memory
-from bagport.dataset.layout import INFO_PATH
 from bagport.dataset.meta import EpisodeStats, build_info, load_episode_stats, write_meta
 from bagport.dataset.provenance import write_provenance
 from bagport.dataset.publish import commit_append, swap_into_place
@@ -182,10 +180,8 @@ def check_same_features(base: DatasetBase, info: dict[str, Any]) -> None:
 
 
 def _total_episodes(output: str) -> int:
-    fs, root = url_to_fs(output)
-    fs.invalidate_cache()
-    with fs.open(f"{root.rstrip('/')}/{INFO_PATH}", "r", encoding="utf-8") as handle:
-        return int(json.load(handle)["total_episodes"])
+    url_to_fs(output)[0].invalidate_cache()
+    return int(read_info(output)["total_episodes"])
 
 
 def _meta_size(root: Path) -> int:

@@ -10,11 +10,10 @@ import pandas as pd
 from fsspec.core import url_to_fs
 
 from bagport.dataset.bags_index import BAGS_SCHEMA, bag_rows
-from bagport.dataset.base import read_base, record_head, record_string, record_tail
+from bagport.dataset.base import read_base, read_info, record_head, record_string, record_tail
 from bagport.dataset.checksums import latest_record
 from bagport.dataset.layout import (
     APPEND_RUN_RECORD_PATH,
-    INFO_PATH,
     JOURNAL_PATH,
     RUN_RECORD_PATH,
     TASKS_PATH,
@@ -83,8 +82,7 @@ def dataset_bags(root: str) -> DatasetBags:
 def dataset_report(root: str) -> DatasetReport:
     """The report of a dataset as it stands (a run that had nothing new to add)."""
     fs, path = url_to_fs(root)
-    with fs.open(f"{path.rstrip('/')}/{INFO_PATH}", "r", encoding="utf-8") as handle:
-        info = json.load(handle)
+    info = read_info(root)
     tasks = pd.read_parquet(f"{root.rstrip('/')}/{TASKS_PATH}", storage_options=fs.storage_options)
     videos = tuple(k for k, f in info["features"].items() if f.get("dtype") == "video")
     size = sum(int(fs.size(p)) for p in fs.find(path))

@@ -15,8 +15,9 @@ from fsspec.core import url_to_fs
 
 from bagport import __version__
 from bagport.bags import source_stamp
-from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
+from bagport.dataset import DatasetLimits, DatasetReport
 from bagport.dataset.history import dataset_report, record_exclusions
+from bagport.dataset.write import dataset_written
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import DatasetWriteError
 from bagport.formats import write_formats
@@ -229,27 +230,27 @@ def reduce_run(
     plan: RunPlan, staged: Sequence[PlannedEpisode], failures: Sequence[EpisodeFailure] = ()
 ) -> DatasetReport:
     """The whole reduce in this process (:func:`start_reduce`, the LeRobot write, :func:`commit_reduce`);
-    the flow runs the same steps with each output file as its own task (``flows/reduce.py``)."""
+    the flow runs the same steps with each output file as its own task (``flows/reduce.py``). The output
+    stays held until the other formats are written from the staged episodes, as the flow holds it: an
+    append meanwhile would otherwise take them for a killed run's leftovers and remove them."""
     start = start_reduce(plan, staged, failures)
     if isinstance(start, DatasetReport):
         return start
-    lerobot = (
-        write_dataset(
-            start.kept,
-            plan.config.output,
-            robot_type=plan.contract.robot_type,
-            limits=start.limits,
-            run_record=start.record,
-            overwrite=plan.config.overwrite,
-            qa=start.entries,
-            qa_config=plan.qa.model_dump(mode="json"),
-            append=plan.config.append,
-            expect_episodes=plan.dataset_episodes,
-        )
-        if "lerobot" in plan.config.formats
-        else None
-    )
-    return commit_reduce(plan, staged, start, lerobot)
+    if "lerobot" not in plan.config.formats:
+        return commit_reduce(plan, staged, start, None)
+    with dataset_written(
+        start.kept,
+        plan.config.output,
+        robot_type=plan.contract.robot_type,
+        limits=start.limits,
+        run_record=start.record,
+        overwrite=plan.config.overwrite,
+        qa=start.entries,
+        qa_config=plan.qa.model_dump(mode="json"),
+        append=plan.config.append,
+        expect_episodes=plan.dataset_episodes,
+    ) as lerobot:
+        return commit_reduce(plan, staged, start, lerobot)
 
 
 def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:

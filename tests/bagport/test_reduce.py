@@ -4,11 +4,20 @@ the run record needs it."""
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
+import pytest
+
+import bagport.reduce
+from bagport.dataset import DatasetReport
 from bagport.dataset.provenance import episode_provenance
+from bagport.dataset.repair import repair_dataset
 from bagport.episode.staged import PlannedEpisode
+from bagport.errors import DatasetWriteError
+from bagport.formats import write_formats
 from bagport.reduce import read_staged
-from tests.helpers import staged_episodes
+from bagport.synth import EpisodeSpec, write_episode_bag
+from tests.helpers import SAMPLE_CONTRACT, SMALL_CAMERAS, convert_in_process, staged_episodes
 
 
 def test_held_summaries_are_lean_and_the_run_record_gets_them_whole(tmp_path: Path) -> None:
@@ -24,3 +33,28 @@ def test_held_summaries_are_lean_and_the_run_record_gets_them_whole(tmp_path: Pa
         zip(held, (p.apply(s) for p, s in zip(planned, full, strict=True)), strict=True)
     ):
         assert episode_provenance(lean, n) == episode_provenance(whole, n)  # the run record's entry
+
+
+def test_the_output_stays_held_while_the_other_formats_are_written(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``reduce_run`` writes the other formats from the staged episodes after the LeRobot commit, with the
+    output still held: an append started meanwhile refuses (its recovery finds the write live) instead of
+    taking those staged episodes for a killed run's leftovers and removing them."""
+    bag = tmp_path / "ep0"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=1.0, cameras=SMALL_CAMERAS))
+    out = tmp_path / "dataset"
+    refusals: list[str] = []
+
+    def write_formats_checked(*args: Any, **kwargs: Any) -> dict[str, DatasetReport]:
+        with pytest.raises(DatasetWriteError, match="another bagport run is writing") as refused:
+            repair_dataset(str(out))
+        refusals.append(str(refused.value))
+        assert len(list((tmp_path / "staging").iterdir())) == 1  # what the formats read is there
+        return write_formats(*args, **kwargs)
+
+    monkeypatch.setattr(bagport.reduce, "write_formats", write_formats_checked)
+    convert_in_process(str(bag), SAMPLE_CONTRACT.read_text(), tmp_path, formats=("lerobot", "hdf5"))
+    assert len(refusals) == 1
+    assert repair_dataset(str(out)).actions == ()
+    assert (tmp_path / "dataset.hdf5").exists() and not (tmp_path / "staging").exists()

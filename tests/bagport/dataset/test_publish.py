@@ -13,8 +13,11 @@ import pytest
 import bagport.dataset.publish
 from bagport.dataset import write_dataset
 from bagport.dataset.crashpoints import set_hook
-from bagport.dataset.publish import exchange
+from bagport.dataset.publish import building_beside, exchange, swap_into_place
+from bagport.dataset.repair import repair_dataset
 from bagport.dataset.validate import validate_dataset
+from bagport.dataset.write import dataset_written
+from bagport.errors import DatasetWriteError
 from bagport.staging import EpisodeSummary
 
 
@@ -100,3 +103,35 @@ def test_an_append_that_fails_while_moving_its_files_in_takes_them_out_again(
         set_hook(None)
     assert {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()} == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+
+
+@pytest.mark.parametrize("exchanges", [True, False], ids=["exchange", "two-renames"])
+@pytest.mark.parametrize("mode", ["first", "overwrite", "append"])
+def test_the_output_stays_held_after_its_commit_until_the_write_ends(
+    staged: list[EpisodeSummary], tmp_path: Path, monkeypatch: pytest.MonkeyPatch, mode: str, exchanges: bool
+) -> None:
+    """What a run does after its commit (the other formats, from its staged episodes) happens while another
+    run's recovery still finds the write live and refuses, whatever the commit did with the build folder: a
+    first write renames it into place, an overwrite swaps the old dataset into it."""
+    if not exchanges:
+        monkeypatch.setattr(bagport.dataset.publish, "exchange", lambda a, b: False)
+    out = tmp_path / "ds"
+    if mode != "first":
+        write_dataset(staged[:1], str(out), robot_type="r")
+    episodes = staged[1:] if mode == "append" else staged
+    with dataset_written(
+        episodes, str(out), robot_type="r", overwrite=mode == "overwrite", append=mode == "append"
+    ) as report:
+        assert (
+            report.episodes == 2 and json.loads((out / "meta/info.json").read_text())["total_episodes"] == 2
+        )
+        with pytest.raises(DatasetWriteError, match="another bagport run is writing"):
+            repair_dataset(str(out))
+        with pytest.raises(DatasetWriteError, match="another bagport run is writing"):
+            write_dataset(staged, str(out), robot_type="r", overwrite=True)
+        if mode != "append":  # a run whose recovery ran before this one's commit, publishing over it
+            with building_beside(out) as late, pytest.raises(DatasetWriteError, match="still finishing"):
+                swap_into_place(late, out)
+    assert repair_dataset(str(out)).actions == ()  # nothing left to recover: the write ended whole
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+    assert validate_dataset(out, decode_every=1000).episodes == 2

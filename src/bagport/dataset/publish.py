@@ -3,10 +3,11 @@
 A write into ``X`` builds in ``.X.tmp-<hex>`` beside it and holds an exclusive ``flock`` on that
 folder while it lives.
 
-- **Publish** (first write or ``--overwrite``): the build is exchanged with ``X`` (an empty folder
-  made there on a first write) in one ``renameat2(RENAME_EXCHANGE)``: at every moment ``X`` is the old
-  or the new dataset, never missing. The build path then holds the old dataset, locked until the
-  write ends (the run may still read its staged episodes for other formats), then removed.
+- **Publish** (first write or ``--overwrite``): the build is renamed to ``X``, or, when ``X``
+  exists, exchanged with it in one ``renameat2(RENAME_EXCHANGE)``: at every moment ``X`` is the old
+  or the new dataset, never missing. The build path then holds the old dataset, which is removed.
+  The build folder's lock moves with it: ``X`` stays locked until the write ends (the run may still
+  read its staged episodes, for other formats).
   Where the exchange is unsupported (not Linux, or a file system without it) two renames are the
   fallback: ``X`` -> ``.X.old-<hex>``, build -> ``X``; a crash between them leaves ``X`` missing
   for a moment, and recovery renames the old one back.
@@ -21,7 +22,8 @@ rolled forward when ``X/meta/info.json`` is the new one, else back (the moved fi
 so they are removed); a build folder nobody holds the lock of is removed (complete or not, its
 run never committed it: the staging store still has its episodes); with ``X`` missing the newest
 complete ``.X.old-*`` is renamed back; remains of old datasets are removed. Only names bagport
-makes are touched; a build still locked belongs to a live run and recovery refuses to go on.
+makes are touched; a build still locked, or ``X`` itself locked (a write that published it and has not
+ended), belongs to a live run and recovery refuses to go on.
 """
 
 from __future__ import annotations
@@ -51,9 +53,6 @@ _SUFFIX = re.compile(r"\.(tmp|old)-[0-9a-f]{8}")
 _AT_FDCWD = -100
 _RENAME_EXCHANGE = 2
 _SYS_RENAMEAT2 = {"x86_64": 316, "aarch64": 276}
-_SWAPPED: dict[Path, int] = {}
-"""Per build folder that :func:`swap_into_place` published: the lock on what the swap left at its path,
-released by :func:`building_beside` when its block ends."""
 
 
 def exchange(a: Path, b: Path) -> bool:
@@ -109,6 +108,18 @@ def _busy(final: Path, build: Path) -> DatasetWriteError:
     )
 
 
+def _refuse_if_writing(final: Path) -> None:
+    """``final`` locked: a run published it (its build folder's lock moved with the folder) and is still
+    writing from it or from its staged episodes, so nothing of its write may be taken for a dead run's."""
+    fd = _lock(final)
+    if fd is None:
+        raise DatasetWriteError(
+            f"another bagport run is writing {final} (it is finishing the write it published there); "
+            "nothing was written. Fix: wait for that run to finish, or write to another --output."
+        )
+    os.close(fd)
+
+
 def _remove_unlocked(final: Path, build: Path) -> None:
     fd = _lock(build)
     if fd is None:
@@ -161,6 +172,8 @@ def recover_local(final: Path) -> list[str]:
     """Bring ``final`` back to a consistent dataset after a crashed write; what was done, one line each
     (empty when there was nothing to do). See the module docstring."""
     actions: list[str] = []
+    if final.is_dir():
+        _refuse_if_writing(final)
     journal = read_journal(LocalFileSystem(), str(final)) if final.is_dir() else None
     if journal is not None:
         actions += _recover_append(final, journal)
@@ -194,9 +207,7 @@ def recover_local(final: Path) -> list[str]:
 @contextmanager
 def building_beside(final: Path) -> Iterator[Path]:
     """A fresh ``.X.tmp-<hex>`` build folder beside ``final``, locked while in use and removed after
-    (whatever of it was not moved into place). After :func:`swap_into_place` the build path holds what
-    was at ``final`` before, locked too until the block ends: the write stays live for another run's
-    recovery while the block still reads what it wrote from (the other formats from the staged episodes)."""
+    (whatever of it was not moved into place)."""
     final.parent.mkdir(parents=True, exist_ok=True)
     build = final.parent / f".{final.name}.tmp-{uuid.uuid4().hex[:8]}"
     build.mkdir()
@@ -208,9 +219,6 @@ def building_beside(final: Path) -> Iterator[Path]:
     finally:
         shutil.rmtree(build, ignore_errors=True)
         os.close(fd)
-        swapped = _SWAPPED.pop(build, None)
-        if swapped is not None:
-            os.close(swapped)
 
 
 def _replace(new: Path, current: Path, retired_name: str) -> None:
@@ -228,26 +236,13 @@ def _replace(new: Path, current: Path, retired_name: str) -> None:
 
 
 def swap_into_place(build: Path, final: Path) -> None:
-    """Put the dataset built in ``build`` (a :func:`building_beside` folder) at ``final``, replacing one
-    there (atomically where the OS can); ``build`` then holds the old dataset, or an empty folder, for
-    the caller to remove. What lands at ``build`` is locked before the swap: the build folder's own lock
-    moves with the new dataset to ``final``, and a build path left unlocked would tell another run's
-    recovery that this write is over."""
+    """Put the dataset built in ``build`` at ``final`` (replacing one there, atomically where the OS can);
+    ``build`` then holds the old dataset, if any, for the caller to remove."""
     reached("local.publish.built")
     if not final.exists():
-        final.mkdir()  # swapped out empty: the build path stays a locked folder
-    held = _lock(final)
-    if held is None:  # another run published it and is still writing from it (its other formats)
-        raise DatasetWriteError(
-            f"another bagport run is still finishing its write of {final}; nothing was written. Fix: wait "
-            "for that run to finish, or write to another --output."
-        )
-    try:
+        build.rename(final)
+    else:
         _replace(build, final, f".{final.name}.old-{uuid.uuid4().hex[:8]}")
-    except BaseException:
-        os.close(held)
-        raise
-    _SWAPPED[build] = held
     reached("local.publish.swapped")
 
 

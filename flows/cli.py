@@ -95,11 +95,12 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     except pydantic.ValidationError as err:
         raise BagportError(f"invalid options: {_option_errors(err)}") from err
     if args.push_to_hub and (
-        args.repo_id is None or "lerobot" not in config.formats or "://" in config.output
+        config.repo_id is None or "lerobot" not in config.formats or "://" in config.output
     ):
         raise BagportError(
-            "--push-to-hub publishes the local LeRobot dataset under --repo-id: give --repo-id ORG/NAME, keep "
-            "lerobot in --format and a local --output (push one on an object store from a local copy)"
+            "--push-to-hub publishes the local LeRobot dataset under --repo-id: give --repo-id ORG/NAME (or "
+            "repo_id: in the --config file), keep lerobot in --format and a local --output (push one on an "
+            "object store from a local copy)"
         )
     if args.push_to_hub:
         hf_token()  # before converting, not after

@@ -171,3 +171,25 @@ def test_a_missing_option_is_named_as_the_user_gives_it(capfd: pytest.CaptureFix
     assert "contract: required: give --contract (or contract: in a --config file)" in capfd.readouterr().err
     assert main(["convert", "--contract", "c.yaml", "--output", "out"]) == 2
     assert "give exactly one of --manifest and --glob" in capfd.readouterr().err
+
+
+def test_push_to_hub_takes_the_repo_id_from_the_config_file(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``repo_id:`` in the run file is the repository a push uses, as ``--repo-id`` is: the run goes on to the
+    next check (the token, checked before anything converts)."""
+    monkeypatch.delenv("HF_TOKEN", raising=False)
+    run = tmp_path / "run.yaml"
+    options = {
+        "bags_glob": str(tmp_path / "bags/*"),
+        "contract": str(SAMPLE_CONTRACT),
+        "output": str(tmp_path / "ds"),
+    }
+    run.write_text(yaml.safe_dump(options))
+    assert main(["convert", "--config", str(run), "--push-to-hub"]) == 2
+    assert "give --repo-id ORG/NAME (or repo_id: in the --config file)" in capfd.readouterr().err
+    run.write_text(yaml.safe_dump({**options, "repo_id": "me/robot"}))
+    assert main(["convert", "--config", str(run), "--push-to-hub"]) == 2
+    err = capfd.readouterr().err
+    assert "HF_TOKEN is not set" in err and "--repo-id" not in err
+    assert not (tmp_path / "ds").exists()

@@ -90,8 +90,10 @@ def _add_qa(sub: Subparsers, handler: Handler) -> argparse.ArgumentParser:
         "line per episode (verdict, score, `bags[i] <bag>#<n> (label)`, what failed), an optional "
         "self-contained HTML report. Exits 1 when an episode that counts fails.",
     )
-    qa.add_argument("--manifest", required=True)
-    qa.add_argument("--contract", required=True)
+    qa.add_argument(
+        "--manifest", required=True, help="manifest of the bags to score (YAML or CSV), as convert takes"
+    )
+    qa.add_argument("--contract", required=True, help="contract YAML the episodes are scored against")
     qa.add_argument("--qa", default=None, help="QA thresholds YAML (default: built-in)")
     qa.add_argument("--report", default=None, help="write a self-contained HTML report here")
     qa.add_argument("--workers", type=int, default=None, help="bags scored in parallel (default: CPU count)")
@@ -130,7 +132,11 @@ def _add_dataset_commands(sub: Subparsers, handlers: Mapping[str, Handler]) -> N
         "Exits 2 with a precise message on the first violation.",
     )
     validate.add_argument("root", help="dataset folder")
-    validate.add_argument("--repo-id", default=None)
+    validate.add_argument(
+        "--repo-id",
+        default=None,
+        help="repo id LeRobot loads the dataset under (default: local/<folder name>)",
+    )
     validate.add_argument(
         "--every", type=int, default=1, help="decode every n-th frame plus each episode's last (default: all)"
     )
@@ -142,7 +148,7 @@ def _add_dataset_commands(sub: Subparsers, handlers: Mapping[str, Handler]) -> N
         description="Finishes or undoes a write into OUT (local or s3://...) that a crash interrupted, from its "
         "intent record (.bagport-journal.json), and prints what it did (or 'nothing to repair'); also removes "
         "temporary folders of dead bagport runs. Every convert does the same first, so a scheduled run never "
-        "appends onto an unrecovered dataset.",
+        "appends onto an unrecovered dataset. Exits 2 when OUT does not exist, or while another run writes it.",
     )
     repair.add_argument("output", help="dataset folder or URI (as given to convert --output)")
     repair.set_defaults(func=handlers["repair"])
@@ -172,9 +178,11 @@ def _add_contract(sub: Subparsers, handlers: Mapping[str, Handler]) -> list[argp
         "not map. Edit it, then `contract check` it.",
     )
     init.add_argument("--bag", required=True, help="bag to draft from")
-    init.add_argument("--out", default=None, help="write the draft here (default: print it)")
-    init.add_argument("--robot-type", default="my_robot")
-    init.add_argument("--fps", type=int, default=30)
+    init.add_argument(
+        "--out", default=None, help="write the draft here, a file that does not exist yet (default: print it)"
+    )
+    init.add_argument("--robot-type", default="my_robot", help="the draft's robot_type (default: my_robot)")
+    init.add_argument("--fps", type=int, default=30, help="the draft's frames per second (default: 30)")
     init.set_defaults(func=handlers["contract init"])
     return [check, init]
 
@@ -187,7 +195,9 @@ def _add_synth(sub: Subparsers, handler: Handler) -> None:
         "ROS 1 .bag in turn), plus DIR/manifest.yaml.",
     )
     synth.add_argument("--out", required=True, help="folder for the bags and manifest.yaml")
-    synth.add_argument("--episodes", type=int, default=4)
+    synth.add_argument("--episodes", type=int, default=4, help="bags to write (default: 4)")
     synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
-    synth.add_argument("--seed", type=int, default=0)
+    synth.add_argument(
+        "--seed", type=int, default=0, help="first random seed; bag i uses seed + i (default: 0)"
+    )
     synth.set_defaults(func=handler)

@@ -23,7 +23,7 @@ command, every option, its default. Errors print as one paragraph (what, where, 
 goes away (`bagport convert ... | head`, a `tee` or log shipper that dies), it drops what it would have
 printed and goes on to its dataset and its own exit code (the logs are still on the Prefect server). A run
 ended by SIGTERM (a scheduler's time limit) stops at once, as a kill does, after one line saying that the
-same command resumes it (exit status 143).
+same command resumes it (exit status 143). `bagport --version` prints the installed version.
 """
 
 

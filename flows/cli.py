@@ -109,6 +109,8 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
     plan = plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts
     if plan.staging_removed:
         print(plan.staging_note(), file=sys.stderr)
+    for overlap in plan.overlaps:
+        print(f"warning: {overlap.note()}", file=sys.stderr)
     if throwaway_api and (plan.up_to_date or (not plan.requests and not plan.reused)):
         # up to date, or an append with nothing new
         report = finish_up_to_date(plan) if plan.up_to_date else finish_nothing_new(plan)

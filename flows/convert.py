@@ -75,6 +75,8 @@ def convert_flow(config: ConvertConfig) -> DatasetReport | State[Any]:
     plan = _checked_plan(config) or plan_task(config)
     if plan.staging_removed:
         logger.info("%s: %s", plan.staging_note(), ", ".join(plan.staging_removed))
+    for overlap in plan.overlaps:
+        logger.warning("%s", overlap.note())
     finished = _nothing_to_convert(plan)
     if finished is not None:
         return finished

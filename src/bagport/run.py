@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -32,6 +32,7 @@ from bagport.segment import segment_request, segments_bags
 from bagport.selection import EpisodeFailure
 from bagport.uris import is_local, read_text, require_bucket
 from bagport.video import EncoderSettings
+from bagport.window_overlaps import WindowOverlap, window_overlaps
 
 __all__ = [
     "EpisodeFailure",
@@ -70,6 +71,9 @@ class RunPlan:
     staging_removed: tuple[str, ...] = ()
     """An append's: staged episodes the dataset holds already, left in the staging store by a run killed
     after its commit, which this plan removed (not with ``--keep-staging``)."""
+    overlaps: tuple[WindowOverlap, ...] = ()
+    """Planned episodes whose window overlaps another window of their bag (another entry's, or one the
+    dataset holds): warned of, not refused (:mod:`bagport.window_overlaps`)."""
 
     def staging_note(self) -> str:
         """One line on :attr:`staging_removed`, for the run's log and the CLI."""
@@ -109,6 +113,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     bags = manifest.bags
     dataset_episodes = 0 if config.append else None
     removed: tuple[str, ...] = ()
+    held: Iterable[tuple[str, str | None]] = ()
     if config.append and fs.exists(out_path):
         known = dataset_bags(config.output)
         if not config.keep_staging:  # a local output's recovery above refused if a write were live
@@ -116,6 +121,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             removed = remove_finished_staging(staging, finished)
         bags = bags_to_append(bags, known, stamp_of, msg_definitions)
         dataset_episodes = check_append_fits(config, contract, adding=bool(bags))
+        held = known.kept
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
     check_format_outputs(config)
@@ -138,7 +144,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     )
     plan = RunPlan(
         config, contract, manifest, requests, contract_text, qa,
-        dataset_episodes=dataset_episodes, staging_removed=removed,
+        dataset_episodes=dataset_episodes, staging_removed=removed, overlaps=window_overlaps(bags, held),
     )  # fmt: skip
     return _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
 

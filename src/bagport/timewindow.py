@@ -11,6 +11,7 @@ A low, neutral module: the manifest (:mod:`bagport.manifest`), the episode reque
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 __all__ = ["WHOLE_BAG", "TimeWindow", "WindowNs"]
@@ -47,6 +48,62 @@ class TimeWindow:
         if self.is_whole_bag:
             return ""
         return f"{self.start_ns}:{self.end_ns}:{self.start_s}:{self.end_s}"
+
+    @classmethod
+    def from_key(cls, key: str | None) -> TimeWindow | None:
+        """The window whose :meth:`key` this is; ``None`` for anything else (an older record's ``None``)."""
+        if key is None:
+            return None
+        if key == "":
+            return cls()
+        parts = key.split(":")
+        if len(parts) != 4:
+            return None
+        try:
+            start_ns, end_ns = (None if p == "None" else int(p) for p in parts[:2])
+            start_s, end_s = (None if p == "None" else float(p) for p in parts[2:])
+        except ValueError:
+            return None
+        return cls(start_ns=start_ns, end_ns=end_ns, start_s=start_s, end_s=end_s)
+
+    def overlaps(self, other: TimeWindow) -> bool | None:
+        """Whether two windows of one bag share more than an instant (consecutive windows, one ending where
+        the next starts, do not); ``None`` when that needs the bag's start: one window is given in seconds
+        from it and the other in ROS time, or one mixes the two clocks."""
+        mine, theirs = self._span(), other._span()
+        if mine is None or theirs is None:
+            return None
+        (clock, start, end), (other_clock, other_start, other_end) = mine, theirs
+        if clock is not None and other_clock is not None and clock != other_clock:
+            return None
+        return start < other_end and other_start < end
+
+    def _span(self) -> tuple[str | None, float, float] | None:
+        """``(clock, start, end)`` on the window's one clock (``"ns"``, ``"s"``, ``None`` for the whole bag),
+        an end not given as infinite; ``None`` for a window on both clocks."""
+        on_ns = self.start_ns is not None or self.end_ns is not None
+        on_s = self.start_s is not None or self.end_s is not None
+        if on_ns and on_s:
+            return None
+        start, end = (self.start_ns, self.end_ns) if on_ns else (self.start_s, self.end_s)
+        low = -math.inf if start is None else float(start)
+        high = math.inf if end is None else float(end)
+        return ("ns" if on_ns else "s" if on_s else None), low, high
+
+    def text(self) -> str:
+        """The window as a person reads it: ``the whole bag``, ``12.5..47 s`` (from the bag's start),
+        ``from 12.5 s``, ``1700000000000000000..1700000005000000000 ns`` (ROS time)."""
+        if self.is_whole_bag:
+            return "the whole bag"
+        parts = []
+        for start, end, unit in ((self.start_s, self.end_s, "s"), (self.start_ns, self.end_ns, "ns")):
+            if start is not None and end is not None:
+                parts.append(f"{start:g}..{end:g} {unit}" if unit == "s" else f"{start}..{end} {unit}")
+            elif start is not None:
+                parts.append(f"from {start:g} {unit}" if unit == "s" else f"from {start} {unit}")
+            elif end is not None:
+                parts.append(f"to {end:g} {unit}" if unit == "s" else f"to {end} {unit}")
+        return " and ".join(parts)
 
     def resolve(self, bag_start_ns: int, bag_end_ns: int) -> WindowNs | None:
         """The window in log time (ns, inclusive) in a bag spanning ``[bag_start_ns, bag_end_ns]``;

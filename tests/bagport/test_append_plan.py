@@ -70,9 +70,31 @@ def test_another_window_of_a_bag_in_the_dataset_is_appended(tmp_path: Path) -> N
     )
     out = tmp_path / "ds"
     assert _append(first, out) == [str(bag)]
+    assert plan_run(_append_config(both, out)).overlaps == ()  # consecutive windows share an instant only
     assert _append(both, out) == [str(bag)]  # the second window only
     assert _episodes(out) == 2
     assert _append(both, out) == []  # both windows are in
+
+
+def test_an_edited_window_is_appended_as_another_episode_with_a_warning(tmp_path: Path) -> None:
+    """The dataset holds 0..0.75 s of the bag; the manifest now says 0.5..1.5 s: an append adds that window
+    as a new episode (it never replaces one) and the plan names the overlap, on the CLI and in the log."""
+    bag = tmp_path / "bag"
+    write_episode_bag(bag, "mcap", SPEC)
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(f"bags:\n  - {{uri: {bag}, start_s: 0.0, end_s: 0.75}}\n")
+    out = tmp_path / "ds"
+    assert _append(manifest, out) == [str(bag)]
+    manifest.write_text(f"bags:\n  - {{uri: {bag}, start_s: 0.5, end_s: 1.5}}\n")
+    (overlap,) = plan_run(_append_config(manifest, out)).overlaps
+    assert overlap.note() == (
+        f"bags[0] {bag}: its window 0.5..1.5 s overlaps the window 0..0.75 s the dataset holds already: the "
+        "frames in both are in two episodes. An append adds a window as a new episode and never replaces "
+        "one; to change an episode's window, write the dataset again (--overwrite, without --append)"
+    )
+    assert _append(manifest, out) == [str(bag)]
+    assert _episodes(out) == 2
+    assert plan_run(_append_config(manifest, out)).overlaps == ()  # said once: nothing new to add now
 
 
 def test_a_bag_copied_again_is_not_appended_twice_but_another_recording_under_its_name_is(

@@ -65,3 +65,44 @@ def test_a_manifest_entry_gives_its_window_and_it_crosses_processes(tmp_path: Pa
     assert windows == [TimeWindow(start_s=2.0, end_s=3.25), TimeWindow.of_ns(10, 20)]
     assert [w.key() for w in windows] == ["None:None:2.0:3.25", "10:20:None:None"]
     assert pickle.loads(pickle.dumps(windows)) == windows
+
+
+def test_a_window_key_reads_back_as_its_window() -> None:
+    for window in (
+        WHOLE_BAG,
+        TimeWindow(start_s=12.5, end_s=47.0),
+        TimeWindow(start_s=1.0),
+        TimeWindow(start_ns=1_700_000_000_000_000_000, end_ns=1_700_000_005_000_000_000),
+        TimeWindow(start_s=0.25, end_ns=1_700_000_005_000_000_000),
+    ):
+        assert TimeWindow.from_key(window.key()) == window
+    assert TimeWindow.from_key(None) is None and TimeWindow.from_key("a:b") is None
+    assert TimeWindow.from_key("x:None:None:None") is None
+
+
+@pytest.mark.parametrize(
+    ("a", "b", "overlap"),
+    [
+        (TimeWindow(start_s=0.0, end_s=10.0), TimeWindow(start_s=5.0, end_s=20.0), True),
+        (TimeWindow(start_s=0.0, end_s=10.0), TimeWindow(start_s=10.0, end_s=20.0), False),  # consecutive
+        (TimeWindow(start_s=0.0, end_s=10.0), TimeWindow(start_s=11.0), False),
+        (TimeWindow(end_s=10.0), TimeWindow(start_s=9.0), True),  # open ends: the bag's start and end
+        (WHOLE_BAG, TimeWindow(start_s=3.0, end_s=4.0), True),
+        (WHOLE_BAG, TimeWindow(start_ns=3, end_ns=4), True),
+        (TimeWindow(start_ns=0, end_ns=10), TimeWindow(start_ns=5, end_ns=6), True),
+        (TimeWindow(start_ns=0, end_ns=10), TimeWindow(start_s=0.0, end_s=1.0), None),  # needs the bag
+        (TimeWindow(start_s=0.0, end_ns=10), TimeWindow(start_s=0.0, end_s=1.0), None),
+    ],
+)
+def test_two_windows_of_a_bag_overlap_by_more_than_an_instant(
+    a: TimeWindow, b: TimeWindow, overlap: bool | None
+) -> None:
+    assert a.overlaps(b) is overlap and b.overlaps(a) is overlap
+
+
+def test_a_window_reads_as_a_person_says_it() -> None:
+    assert WHOLE_BAG.text() == "the whole bag"
+    assert TimeWindow(start_s=12.5, end_s=47.0).text() == "12.5..47 s"
+    assert TimeWindow(start_s=3.0).text() == "from 3 s"
+    assert TimeWindow(start_ns=5, end_ns=9).text() == "5..9 ns"
+    assert TimeWindow(start_s=1.0, end_ns=9).text() == "from 1 s and to 9 ns"

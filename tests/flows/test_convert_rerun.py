@@ -146,6 +146,28 @@ def test_a_rerun_converts_only_what_is_not_staged(prefect: None, bags: Path, tmp
     assert _dataset(tmp_path / "third")["data"] == _dataset(tmp_path / "first")["data"]
 
 
+def test_overlapping_windows_of_a_bag_are_converted_with_a_warning_on_the_cli(
+    prefect: None, bags: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    manifest = bags / "overlap.yaml"
+    windows = [
+        {"uri": "bag_004", "start_s": 0.0, "end_s": 0.4},
+        {"uri": "bag_004", "start_s": 0.3, "end_s": 0.6},
+    ]
+    manifest.write_text(yaml.safe_dump({"bags": windows}))
+    argv = ["convert", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT)]
+    assert (
+        main([*argv, "--output", str(tmp_path / "ds"), "--runner", "thread", "--workers", "1", "--quiet"])
+        == 0
+    )
+    warned = [line for line in capsys.readouterr().err.splitlines() if line.startswith("warning: ")]
+    assert warned == [
+        f"warning: bags[1] {bags / 'bag_004'}: its window 0.3..0.6 s overlaps bags[0]'s window 0..0.4 s: the "
+        "frames in both are in two episodes (give each entry its own part of the bag if that is not meant)"
+    ]
+    assert json.loads((tmp_path / "ds/meta/info.json").read_text())["total_episodes"] == 2
+
+
 def test_append_of_bags_all_in_the_dataset_submits_nothing_and_exits_0(
     prefect: None, bags: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:

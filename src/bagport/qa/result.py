@@ -54,16 +54,16 @@ def judge(
 
     if crosses(gate.fail):
         verdict: Verdict = "fail" if gate.hard else "warn"
-        limit = gate.fail
+        limit, which = (
+            gate.fail,
+            "fail limit {:g}" if gate.hard else "fail limit {:g}; a soft check, so it warns",
+        )
     elif crosses(gate.warn):
-        verdict, limit = "warn", gate.warn
+        verdict, limit, which = "warn", gate.warn, "warn limit {:g}"
     else:
-        verdict, limit = "pass", None
-    bound = (
-        ""
-        if limit is None
-        else f" ({'at or below' if lower_is_worse else 'at or above'} {verdict} limit {limit:g})"
-    )
+        verdict, limit, which = "pass", None, ""
+    side = "at or below" if lower_is_worse else "at or above"
+    bound = "" if limit is None else f" ({side} {which.format(limit)})"
     return CheckResult(check, subject, float(value), verdict, gate.hard, describe + bound)
 
 

@@ -101,3 +101,22 @@ def test_to_dict_is_asdict_without_copying_the_plots() -> None:
     assert as_dict == asdict(record)
     assert json.dumps(as_dict) == json.dumps(asdict(record))  # qa.json byte for byte, keys in order
     assert EpisodeQA.from_dict(json.loads(json.dumps(as_dict))) == record
+
+
+def test_a_reason_names_the_limit_the_value_crossed() -> None:
+    """A soft check past its fail limit warns, and says it crossed the fail limit (not "warn limit 0.8")."""
+    from bagport.qa import judge  # noqa: PLC0415
+    from bagport.qa.config import Gate  # noqa: PLC0415
+
+    soft, hard = Gate(warn=0.95, fail=0.8, hard=False), Gate(warn=0.95, fail=0.8)
+    ratio = "65.0% of the expected messages"
+    assert judge("rates.rate_ratio", "/t", 0.65, soft, ratio, lower_is_worse=True).reason == (
+        f"{ratio} (at or below fail limit 0.8; a soft check, so it warns)"
+    )
+    assert judge("rates.rate_ratio", "/t", 0.65, hard, ratio, lower_is_worse=True).reason == (
+        f"{ratio} (at or below fail limit 0.8)"
+    )
+    assert judge("rates.rate_ratio", "/t", 0.9, soft, ratio, lower_is_worse=True).reason == (
+        f"{ratio} (at or below warn limit 0.95)"
+    )
+    assert judge("rates.gap_periods", "/t", 0.5, hard, "0.5 periods").reason == "0.5 periods"  # a pass

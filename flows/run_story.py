@@ -7,6 +7,7 @@ the episodes of this run, from its QA rows.
 
 from __future__ import annotations
 
+from collections import Counter
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from typing import Any
@@ -15,6 +16,7 @@ from prefect.client.schemas.objects import State
 from prefect.states import Completed
 
 from bagport.dataset import DatasetReport
+from bagport.qa import episode_ref
 
 __all__ = ["EXCLUSIONS_STATE", "RunCounts", "completed_state", "started_name"]
 
@@ -36,11 +38,18 @@ class RunCounts:
     @classmethod
     def of(cls, report: DatasetReport) -> RunCounts:
         kept = [row for row in report.qa if row.episode_index is not None]
+        reused = Counter(report.reused)  # every reused episode, an excluded one (its label, its QA) too
+        reused_kept = 0
+        for row in kept:
+            ref = episode_ref(row.bag_uri, row.segment)
+            if reused[ref]:
+                reused[ref] -= 1
+                reused_kept += 1
         return cls(
             converted=len(kept),
             warned=sum(row.verdict == "warn" for row in kept),
             excluded=len(report.excluded),
-            reused=len(report.reused),
+            reused=reused_kept,
             failed_kept=sum(row.verdict == "fail" for row in kept),
         )
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from bagport.dataset import DatasetReport
 from bagport.qa import QABrief
 from bagport.qa.result import Verdict
@@ -49,3 +51,14 @@ def test_without_kept_failures_the_text_does_not_mention_them() -> None:
     counts = RunCounts.of(_report(_brief(0, "warn", 0), _brief(1, "fail", None)))
     assert counts.failed_kept == 0
     assert counts.text() == "1 episode(s) converted (1 with QA warnings), 1 excluded"
+
+
+def test_reused_counts_the_written_episodes_that_came_from_the_staging_store() -> None:
+    """A reused episode a label or QA excluded is among the excluded, not among the written ones."""
+    report = _report(_brief(0, "pass", 0), _brief(1, "warn", 1), _brief(2, "fail", None))
+    counts = RunCounts.of(replace(report, reused=("/bags/ep0", "/bags/ep2")))
+    assert (counts.converted, counts.reused, counts.excluded) == (2, 1, 1)
+    assert (
+        counts.text()
+        == "2 episode(s) converted (1 reused from the staging store, 1 with QA warnings), 1 excluded"
+    )

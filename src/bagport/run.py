@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
@@ -26,7 +26,7 @@ from bagport.dataset.replace import refuse_existing
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, remove_finished_staging, split_staged
 from bagport.formats import check_format_outputs
-from bagport.manifest import Manifest, load_manifest, parse_manifest
+from bagport.manifest import BagEntry, Manifest, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
 from bagport.segment import segment_request, segments_bags
 from bagport.selection import EpisodeFailure
@@ -121,7 +121,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
             removed = remove_finished_staging(staging, finished)
         bags = bags_to_append(bags, known, stamp_of, msg_definitions)
         dataset_episodes = check_append_fits(config, contract, adding=bool(bags))
-        held = known.kept
+        held = _held_windows(known.kept, bags, stamp_of)
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
     check_format_outputs(config)
@@ -144,9 +144,21 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     )
     plan = RunPlan(
         config, contract, manifest, requests, contract_text, qa,
-        dataset_episodes=dataset_episodes, staging_removed=removed, overlaps=window_overlaps(bags, held),
+        dataset_episodes=dataset_episodes, staging_removed=removed,
+        overlaps=window_overlaps(bags, held, whole_bag_split=segments_bags(contract)),
     )  # fmt: skip
     return _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
+
+
+def _held_windows(
+    kept: Mapping[tuple[str, str | None], Mapping[str, str]],
+    bags: Sequence[BagEntry],
+    stamp_of: Callable[[str], str],
+) -> list[tuple[str, str | None]]:
+    """``(URI, window key)`` of the dataset's episodes of the planned bags' recordings as they are now (the
+    same source stamp): a re-recorded bag's windows are not compared with the old recording's."""
+    uris = {bag.uri for bag in bags}
+    return [(uri, key) for (uri, key), stamps in kept.items() if uri in uris and stamp_of(uri) in stamps]
 
 
 def _qa_config(config: ConvertConfig) -> QAConfig:

@@ -68,41 +68,41 @@ class TimeWindow:
 
     def overlaps(self, other: TimeWindow) -> bool | None:
         """Whether two windows of one bag share more than an instant (consecutive windows, one ending where
-        the next starts, do not); ``None`` when that needs the bag's start: one window is given in seconds
-        from it and the other in ROS time, or one mixes the two clocks."""
-        mine, theirs = self._span(), other._span()
-        if mine is None or theirs is None:
+        the next starts, do not); the whole bag overlaps every window. ``None`` when that needs the bag's
+        start: one window is given in seconds from it and the other in ROS time, or one mixes the clocks."""
+        if self.is_whole_bag or other.is_whole_bag:
+            return True
+        mine, theirs = self.span(), other.span()
+        if mine is None or theirs is None or mine[0] != theirs[0]:
             return None
-        (clock, start, end), (other_clock, other_start, other_end) = mine, theirs
-        if clock is not None and other_clock is not None and clock != other_clock:
-            return None
-        return start < other_end and other_start < end
+        return mine[1] < theirs[2] and theirs[1] < mine[2]
 
-    def _span(self) -> tuple[str | None, float, float] | None:
+    def span(self) -> tuple[str | None, float, float] | None:
         """``(clock, start, end)`` on the window's one clock (``"ns"``, ``"s"``, ``None`` for the whole bag),
-        an end not given as infinite; ``None`` for a window on both clocks."""
+        an end not given as infinite (ns stay integers: exact); ``None`` for a window on both clocks."""
         on_ns = self.start_ns is not None or self.end_ns is not None
         on_s = self.start_s is not None or self.end_s is not None
         if on_ns and on_s:
             return None
         start, end = (self.start_ns, self.end_ns) if on_ns else (self.start_s, self.end_s)
-        low = -math.inf if start is None else float(start)
-        high = math.inf if end is None else float(end)
+        low = -math.inf if start is None else start
+        high = math.inf if end is None else end
         return ("ns" if on_ns else "s" if on_s else None), low, high
 
     def text(self) -> str:
-        """The window as a person reads it: ``the whole bag``, ``12.5..47 s`` (from the bag's start),
-        ``from 12.5 s``, ``1700000000000000000..1700000005000000000 ns`` (ROS time)."""
+        """The window as a person reads it: ``the whole bag``, ``12.5..47 s`` (from the bag's start; the
+        seconds as written), ``from 12.5 s``, ``1700000000000000000..1700000005000000000 ns`` (ROS time)."""
         if self.is_whole_bag:
             return "the whole bag"
         parts = []
         for start, end, unit in ((self.start_s, self.end_s, "s"), (self.start_ns, self.end_ns, "ns")):
+            low, high = _number(start), _number(end)
             if start is not None and end is not None:
-                parts.append(f"{start:g}..{end:g} {unit}" if unit == "s" else f"{start}..{end} {unit}")
+                parts.append(f"{low}..{high} {unit}")
             elif start is not None:
-                parts.append(f"from {start:g} {unit}" if unit == "s" else f"from {start} {unit}")
+                parts.append(f"from {low} {unit}")
             elif end is not None:
-                parts.append(f"to {end:g} {unit}" if unit == "s" else f"to {end} {unit}")
+                parts.append(f"to {high} {unit}")
         return " and ".join(parts)
 
     def resolve(self, bag_start_ns: int, bag_end_ns: int) -> WindowNs | None:
@@ -120,6 +120,13 @@ class TimeWindow:
         elif self.end_s is not None:
             end = bag_start_ns + round(self.end_s * _NS_PER_S)
         return start, end
+
+
+def _number(value: float | None) -> str:
+    """Seconds or ns as written (``12345.61``, ``47``), never rounded to fewer digits."""
+    if value is None:
+        return ""
+    return repr(value).removesuffix(".0") if isinstance(value, float) else str(value)
 
 
 WHOLE_BAG = TimeWindow()

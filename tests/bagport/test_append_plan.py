@@ -88,7 +88,7 @@ def test_an_edited_window_is_appended_as_another_episode_with_a_warning(tmp_path
     manifest.write_text(f"bags:\n  - {{uri: {bag}, start_s: 0.5, end_s: 1.5}}\n")
     (overlap,) = plan_run(_append_config(manifest, out)).overlaps
     assert overlap.note() == (
-        f"bags[0] {bag}: its window 0.5..1.5 s overlaps the window 0..0.75 s the dataset holds already: the "
+        f"bags[0] {bag}: its window 0.5..1.5 s overlaps window 0..0.75 s, which the dataset holds already: the "
         "frames in both are in two episodes. An append adds a window as a new episode and never replaces "
         "one; to change an episode's window, write the dataset again (--overwrite, without --append)"
     )
@@ -243,3 +243,23 @@ def test_on_an_object_store_the_newest_run_s_staged_episodes_wait_for_a_later_ap
         final = plan_run(config)
         assert [s.split("-")[0] for s in final.staging_removed] == ["ep1"]
         assert [s.split("-")[0] for s in staged()] == ["ep2"]  # the newest run's waits
+
+
+def test_windows_of_a_re_recorded_bag_are_not_compared_with_the_old_recording_s(tmp_path: Path) -> None:
+    """A new recording under a bag's name is appended again, every window of it: none overlaps the old
+    recording's episodes (other frames), so the plan warns of nothing."""
+    bag = tmp_path / "bag"
+    write_episode_bag(bag, "mcap", SPEC)
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(
+        f"bags:\n  - {{uri: {bag}, start_s: 0.0, end_s: 0.75}}\n  - {{uri: {bag}, start_s: 0.5}}\n"
+    )
+    out = tmp_path / "ds"
+    plan = plan_run(_append_config(manifest, out))
+    assert [o.entry for o in plan.overlaps] == [1]  # the manifest's own two windows overlap
+    reduce_run(plan, stage_all(plan))
+    shutil.rmtree(bag)
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=2.0, cameras=SMALL_CAMERAS, seed=5))
+    plan = plan_run(_append_config(manifest, out))
+    assert len(plan.requests) == 2
+    assert [(o.entry, o.other_entry) for o in plan.overlaps] == [(1, 0)]  # not against the old recording

@@ -92,6 +92,12 @@ def test_a_window_key_reads_back_as_its_window() -> None:
         (TimeWindow(start_ns=0, end_ns=10), TimeWindow(start_ns=5, end_ns=6), True),
         (TimeWindow(start_ns=0, end_ns=10), TimeWindow(start_s=0.0, end_s=1.0), None),  # needs the bag
         (TimeWindow(start_s=0.0, end_ns=10), TimeWindow(start_s=0.0, end_s=1.0), None),
+        (TimeWindow(start_s=0.0, end_ns=10), WHOLE_BAG, True),  # the whole bag overlaps every window
+        (
+            TimeWindow.of_ns(BAG_START_NS, BAG_START_NS + 1000),
+            TimeWindow.of_ns(BAG_START_NS + 900, BAG_END_NS),
+            True,
+        ),
     ],
 )
 def test_two_windows_of_a_bag_overlap_by_more_than_an_instant(
@@ -106,3 +112,4 @@ def test_a_window_reads_as_a_person_says_it() -> None:
     assert TimeWindow(start_s=3.0).text() == "from 3 s"
     assert TimeWindow(start_ns=5, end_ns=9).text() == "5..9 ns"
     assert TimeWindow(start_s=1.0, end_ns=9).text() == "from 1 s and to 9 ns"
+    assert TimeWindow(start_s=12345.61, end_s=13000.0).text() == "12345.61..13000 s"  # as written

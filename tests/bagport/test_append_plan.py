@@ -263,3 +263,6 @@ def test_windows_of_a_re_recorded_bag_are_not_compared_with_the_old_recording_s(
     plan = plan_run(_append_config(manifest, out))
     assert len(plan.requests) == 2
     assert [(o.entry, o.other_entry) for o in plan.overlaps] == [(1, 0)]  # not against the old recording
+    manifest.write_text(f"bags:\n  - {{uri: {bag}, start_s: 0.25, end_s: 1.5}}\n")  # a window of the new one
+    plan = plan_run(_append_config(manifest, out))
+    assert len(plan.requests) == 1 and plan.overlaps == ()

@@ -155,6 +155,13 @@ def _locate_mcap(path: Path | RemotePath) -> Damage | None:
     return None
 
 
+def _read_only(uri: str) -> sqlite3.Connection:
+    """A connection whose text never fails to decode: a damaged file's names and schema can hold any bytes."""
+    db = sqlite3.connect(uri, uri=True)
+    db.text_factory = lambda raw: raw.decode("utf-8", "replace")
+    return db
+
+
 def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
     if isinstance(path, RemotePath):
         return None  # SQLite bags are downloaded before they are read; a remote path is not opened here
@@ -163,7 +170,7 @@ def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
         return Damage(path.name, None, cut.describe(), fix=cut.fix())
     uri = f"file:{quote(str(path.resolve()))}?mode=ro&immutable=1"
     try:
-        with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:
+        with contextlib.closing(_read_only(uri)) as db:
             page_size = int(db.execute("PRAGMA page_size").fetchone()[0])
             roots = [(str(n), int(r)) for n, r in db.execute("SELECT name, rootpage FROM sqlite_master") if r]
             try:
@@ -172,6 +179,8 @@ def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
                 return _walk_btrees(path, page_size, roots) or Damage(path.name, None, f"SQLite: {err}")
     except sqlite3.Error as err:
         return Damage(path.name, None, f"SQLite cannot read its header or schema ({err})")
+    except UnicodeDecodeError:  # SQLite's own message quotes the damaged schema's bytes, not text
+        return Damage(path.name, None, "SQLite cannot read its schema (it holds bytes that are not text)")
     if rows == ["ok"]:
         return _sqlite_row_types(path, uri)
     pages = re.findall(r"page (\d+)", " ".join(rows))
@@ -195,7 +204,7 @@ def _sqlite_row_types(path: Path, uri: str) -> Damage | None:
     missing: a bit flip in a record header that SQLite's structural check does not place."""
     last: tuple[int, str] | None = None
     try:
-        with contextlib.closing(sqlite3.connect(uri, uri=True)) as db:
+        with contextlib.closing(_read_only(uri)) as db:
             for rowid, topic, stamp_type, data_type in db.execute(_ROWS):
                 if topic is None:
                     return Damage(
@@ -210,9 +219,10 @@ def _sqlite_row_types(path: Path, uri: str) -> Damage | None:
                         (str(topic),),
                     )
                 last = (int(rowid), str(topic))
-    except sqlite3.Error as err:
+    except (sqlite3.Error, UnicodeDecodeError) as err:
         after = f" after row {last[0]} (on {last[1]})" if last is not None else ""
-        return Damage(path.name, None, f"the message row{after} cannot be read ({err})")
+        why = "damaged bytes" if isinstance(err, UnicodeDecodeError) else err
+        return Damage(path.name, None, f"the message row{after} cannot be read ({why})")
     return None
 
 

@@ -7,6 +7,7 @@ ROS 1 and SQLite bags do not record a publish time.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
@@ -15,6 +16,8 @@ import numpy.typing as npt
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
+from bagport.bags.damage import damaged_bag
+from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 from bagport.msgtypes import global_topic
@@ -39,6 +42,10 @@ def mcap_publish_times_ns(
                     pairs[global_topic(channel.topic)].append(
                         (int(message.log_time), int(message.publish_time))
                     )
+    except (KeyError, IndexError, struct.error) as err:  # the mcap library on a damaged summary or record
+        raise damaged_bag(
+            err, uri=uri, storage=Storage.MCAP, files=files, action="its publish times cannot be read"
+        ) from err
     except (McapError, OSError, ValueError) as err:
         raise BagReadError(
             f"publish times cannot be read ({type(err).__name__}: {err})",

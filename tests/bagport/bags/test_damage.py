@@ -16,6 +16,7 @@ from rosbags.rosbag1 import Writer as Ros1Writer
 from rosbags.typesys import Stores, get_typestore
 
 from bagport.bags import format_bag_info, open_bag
+from bagport.bags.publish import mcap_publish_times_ns
 from bagport.errors import BagportError, BagReadError, DecodeError
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import realbag
@@ -139,6 +140,41 @@ def _ros1_chunk_offset(path: Path) -> int:
     data = path.read_bytes()
     op = data.index(b"op=\x05")
     return data.rindex(b"\x00\x00", 13, op) - 2  # the record starts with its 4-byte header length
+
+
+def test_sqlite_schema_holding_bytes_that_are_not_text_is_named(tmp_path: Path) -> None:
+    """A byte of the schema's SQL changed to one no UTF-8 text holds: SQLite's own error quotes it, and
+    Python's sqlite3 failed decoding that message (a UnicodeDecodeError escaped the damage report)."""
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "sqlite3", SPEC)
+    db3 = next(bag.glob("*.db3"))
+    data = bytearray(db3.read_bytes())
+    data[data.index(b"ros_distro TEXT NOT NULL") + 20] = 0xB1  # NOT NULL -> NOT \xb1ULL: bad schema SQL
+    db3.write_bytes(bytes(data))
+    with pytest.raises(BagReadError) as caught:
+        _read_all(bag)
+    text = _one_paragraph(caught.value)
+    assert "damage found in ep.db3: SQLite cannot read its schema (it holds bytes that are not text)" in text
+
+
+def test_an_mcap_summary_missing_a_channel_is_damage_also_for_publish_times(tmp_path: Path) -> None:
+    """The mcap library (publish times, ``stamp: publish``) raised a bare KeyError for a chunk index naming a
+    channel the summary does not define."""
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", SPEC)
+    mcap = next(bag.glob("*.mcap"))
+    data = bytearray(mcap.read_bytes())
+    position = int.from_bytes(data[-28:-20], "little")  # the footer's summary start
+    while data[position] != 0x04:  # the summary's first channel record
+        position += 9 + int.from_bytes(data[position + 1 : position + 9], "little")
+    data[position] = 0x80  # now a private record a reader skips: the channel is gone from the summary
+    mcap.write_bytes(bytes(data))
+    with pytest.raises(BagReadError) as caught:
+        mcap_publish_times_ns([mcap], ["/joint_states", "/cmd"], str(bag))
+    text = _one_paragraph(caught.value)
+    assert (
+        text.startswith(f"{bag}: its publish times cannot be read (KeyError: ") and "damage found in" in text
+    )
 
 
 def test_ros1_chunk_that_does_not_decompress_names_its_offset(tmp_path: Path) -> None:

@@ -66,7 +66,8 @@ def cmd_qa(args: argparse.Namespace) -> int:
     if args.report:
         from bagport.qa.report import render_report  # noqa: PLC0415
 
-        Path(args.report).write_text(
+        _write_report(
+            args.report,
             render_report(
                 entries,
                 {
@@ -76,7 +77,6 @@ def cmd_qa(args: argparse.Namespace) -> int:
                     "episodes": len(entries),
                 },
             ),
-            encoding="utf-8",
         )
         print(f"report: {args.report}", file=sys.stderr)
     # episodes left out for their label (failed / discarded demonstrations) do not fail the command
@@ -175,3 +175,17 @@ def cmd_synth(args: argparse.Namespace) -> int:
         print(path)
     print(f"wrote {len(paths)} bag(s) and {Path(args.out) / 'manifest.yaml'}", file=sys.stderr)
     return 0
+
+
+def _write_report(path: str, html: str) -> None:
+    """The QA report at ``path``; a path that cannot be written is one paragraph (the scores printed above
+    stand)."""
+    from bagport.errors import BagportError  # noqa: PLC0415 - keep `--help` fast
+
+    try:
+        Path(path).write_text(html, encoding="utf-8")
+    except OSError as err:
+        raise BagportError(
+            f"--report {path}: cannot be written ({err.strerror or err}); the scores above are complete. Fix: "
+            "give a path in a folder that exists and you can write to."
+        ) from err

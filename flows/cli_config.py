@@ -37,10 +37,31 @@ def load_encoder(value: str | None) -> dict[str, Any]:
         if not preset.is_file():
             raise BagportError(f"--codec {value!r}: no such file and no preset configs/codecs/{value}.yaml")
         path = preset
-    data = yaml.safe_load(path.read_text()) or {}
+    data = _yaml_file(path, f"--codec {value}") or {}
     if not isinstance(data, dict):
         raise BagportError(f"--codec {value}: must be a YAML mapping of encoder settings")
     return data
+
+
+def _yaml_file(path: Path, what: str) -> Any:
+    """A small YAML file's content; a file that cannot be read or parsed is one paragraph naming it."""
+    try:
+        return yaml.safe_load(path.read_text(encoding="utf-8"))
+    except yaml.YAMLError as err:
+        mark = getattr(err, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+        problem = getattr(err, "problem", None) or type(err).__name__
+        raise BagportError(
+            f"{what}: {path} is not valid YAML{where} ({problem}). Fix: correct the file."
+        ) from err
+    except UnicodeDecodeError as err:
+        raise BagportError(
+            f"{what}: {path} is not UTF-8 text (the byte at offset {err.start} is not). Fix: save it as UTF-8."
+        ) from err
+    except OSError as err:
+        raise BagportError(
+            f"{what}: {path} cannot be read ({err.strerror or err}). Fix: check the path."
+        ) from err
 
 
 PRESETS: dict[str, Callable[[str | None], Any]] = {"codec": load_encoder}
@@ -137,7 +158,7 @@ def resolve_options(options: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def _config_file(path: str) -> dict[str, Any]:
-    data = yaml.safe_load(Path(path).read_text(encoding="utf-8")) if Path(path).is_file() else None
+    data = _yaml_file(Path(path), "--config") if Path(path).is_file() else None
     if not isinstance(data, dict):
         raise BagportError(
             f"--config {path}: not a YAML mapping of run options (or no such file). Fix: give a file such as "

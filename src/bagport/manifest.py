@@ -42,8 +42,8 @@ class _Entry(pydantic.BaseModel):
     uri: str = pydantic.Field(min_length=1)
     task: str | None = None
     metadata: dict[str, YamlJson] = pydantic.Field(default_factory=dict)
-    start_s: float | None = pydantic.Field(default=None, ge=0)
-    end_s: float | None = pydantic.Field(default=None, gt=0)
+    start_s: float | None = pydantic.Field(default=None, ge=0, allow_inf_nan=False)
+    end_s: float | None = pydantic.Field(default=None, gt=0, allow_inf_nan=False)
     start_ns: int | None = pydantic.Field(default=None, ge=0)
     end_ns: int | None = pydantic.Field(default=None, gt=0)
 
@@ -233,5 +233,15 @@ def load_manifest(uri: str, *, storage_options: dict[str, Any] | None = None) ->
             text = str(handle.read())
     except FileNotFoundError as err:
         raise ManifestError("file does not exist", file=uri, fix="check the --manifest path.") from err
+    except UnicodeDecodeError as err:
+        raise ManifestError(
+            f"is not UTF-8 text (the byte at offset {err.start} is not)",
+            file=uri,
+            fix="save it as UTF-8 (from Latin-1: `iconv -f latin1 -t utf-8 OLD > NEW`).",
+        ) from err
+    except OSError as err:
+        raise ManifestError(
+            f"cannot be read ({err.strerror or err})", file=uri, fix="check the --manifest path."
+        ) from err
     base_dir = posixpath.dirname(uri) if _is_url(uri) else posixpath.dirname(posixpath.abspath(uri))
     return parse_manifest(text, uri, base_dir=base_dir, storage_options=storage_options)

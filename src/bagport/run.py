@@ -12,8 +12,6 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
-from fsspec.core import url_to_fs
-
 from bagport import __version__
 from bagport.append_plan import bags_to_append, check_append_fits
 from bagport.bags import read_msg_path, source_stamp
@@ -30,7 +28,7 @@ from bagport.manifest import BagEntry, Manifest, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
 from bagport.segment import segment_request, segments_bags
 from bagport.selection import EpisodeFailure
-from bagport.uris import is_local, read_text, require_bucket
+from bagport.uris import is_local, output_fs, read_text, require_bucket
 from bagport.video import EncoderSettings
 from bagport.window_overlaps import WindowOverlap, window_overlaps
 
@@ -96,10 +94,10 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     encoder = EncoderSettings.from_dict(config.encoder)
     qa = _qa_config(config)
     manifest = _manifest(config)
-    fs, out_path = url_to_fs(config.output)
+    fs, out_path = output_fs(config.output, "--output")
     require_bucket(fs, out_path, config.output)
     staging = config.resolved_staging()
-    staging_fs, staging_path = url_to_fs(staging)
+    staging_fs, staging_path = output_fs(staging, "--staging")
     require_bucket(staging_fs, staging_path, staging)
     repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to
     stamps: dict[str, str] = {}

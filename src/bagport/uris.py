@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import fsspec
 from fsspec import AbstractFileSystem
+from fsspec.core import url_to_fs
 
 from bagport.errors import ContractError, DatasetWriteError
 
-__all__ = ["is_local", "protocol_of", "read_text", "require_bucket"]
+__all__ = ["is_local", "output_fs", "protocol_of", "read_text", "require_bucket"]
 
 BUCKET_STORES = frozenset({"s3", "s3a", "gs", "gcs", "abfs", "abfss", "az", "adl"})
 """Object stores whose first path component is a bucket (container) that writing would create."""
@@ -37,6 +38,31 @@ def read_text(uri: str, what: str) -> str:
             fix=f"check the path given as --{what} (or {what}: in a --config file); a relative path is relative "
             "to the working directory.",
         ) from err
+    except UnicodeDecodeError as err:
+        raise ContractError(
+            f"{what} file is not UTF-8 text (the byte at offset {err.start} is not)",
+            file=uri,
+            fix="save it as UTF-8 (from Latin-1: `iconv -f latin1 -t utf-8 OLD > NEW`).",
+        ) from err
+    except OSError as err:
+        raise ContractError(
+            f"{what} file cannot be read ({err.strerror or err})",
+            file=uri,
+            fix=f"check the path given as --{what} (or {what}: in a --config file).",
+        ) from err
+
+
+def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:
+    """fsspec's file system and path for an output or staging ``uri`` (``what``: its option); a protocol
+    fsspec does not know (a typo, or its package not installed) is one paragraph."""
+    try:
+        fs, path = url_to_fs(uri)
+    except (ValueError, ImportError) as err:
+        raise DatasetWriteError(
+            f"{what} {uri}: fsspec cannot open it ({err}); nothing was converted or written. Fix: a local "
+            "path, or a URI fsspec knows (s3://, gs://, ...) with its package installed (s3fs, gcsfs, ...)."
+        ) from err
+    return fs, str(path)
 
 
 def require_bucket(fs: AbstractFileSystem, path: str, uri: str) -> None:

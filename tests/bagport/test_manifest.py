@@ -133,3 +133,17 @@ def test_relative_uris_in_a_remote_manifest() -> None:
     assert [b.uri for b in load_manifest("memory://fleet2/manifest.yaml").bags] == [
         "memory://fleet2/day/ep.mcap"
     ]
+
+
+def test_a_manifest_that_is_not_text_an_infinite_window_or_a_folder_is_one_paragraph(tmp_path: Path) -> None:
+    """Fuzzed inputs that escaped as UnicodeDecodeError, OverflowError and IsADirectoryError."""
+    latin1 = tmp_path / "m.yaml"
+    latin1.write_bytes("bags:\n  - {uri: bags/épisode}\n".encode("latin-1"))
+    with pytest.raises(ManifestError, match=r"is not UTF-8 text \(the byte at offset 21 is not\).*iconv"):
+        load_manifest(str(latin1))
+    endless = tmp_path / "inf.yaml"
+    endless.write_text("bags:\n  - {uri: b, end_s: .inf}\n")
+    with pytest.raises(ManifestError, match="end_s: Input should be a finite number"):
+        load_manifest(str(endless))
+    with pytest.raises(ManifestError, match=r"cannot be read \(Is a directory\)"):
+        load_manifest(str(tmp_path))

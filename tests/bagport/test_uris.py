@@ -11,7 +11,7 @@ from s3fs import S3FileSystem
 from bagport.config import ConvertConfig
 from bagport.errors import ContractError, DatasetWriteError
 from bagport.run import plan_run
-from bagport.uris import read_text
+from bagport.uris import output_fs, read_text
 from flows.cli import main
 from tests.helpers import SAMPLE_CONTRACT
 from tests.s3 import moto_s3
@@ -71,3 +71,17 @@ def test_a_missing_contract_or_qa_file_names_both_places_it_may_come_from(tmp_pa
     with pytest.raises(ContractError, match=r"contract file does not exist") as err:
         read_text(str(tmp_path / "robot.yaml"), "contract")
     assert "Fix: check the path given as --contract (or contract: in a --config file)" in str(err.value)
+
+
+def test_a_small_file_that_is_not_text_or_not_a_file_is_one_paragraph(tmp_path: Path) -> None:
+    binary = tmp_path / "qa.yaml"
+    binary.write_bytes(b"\x89PNG\r\n")
+    with pytest.raises(ContractError, match=r"qa file is not UTF-8 text \(the byte at offset 0 is not\)"):
+        read_text(str(binary), "qa")
+    with pytest.raises(ContractError, match=r"contract file cannot be read \(Is a directory\)"):
+        read_text(str(tmp_path), "contract")
+
+
+def test_an_output_on_a_protocol_fsspec_does_not_know_is_one_paragraph() -> None:
+    with pytest.raises(DatasetWriteError, match=r"--output bogus://x/y: fsspec cannot open it .*nothing was"):
+        output_fs("bogus://x/y", "--output")

@@ -240,3 +240,42 @@ def test_an_append_the_commit_refuses_is_one_paragraph_without_leak_reports(tmp_
     assert "the new episodes' features differ from the dataset's (action, observation.state" in proc.stderr
     assert "nanobind" not in proc.stderr
     assert len(proc.stderr.splitlines()) <= 2, proc.stderr
+
+
+def test_a_codec_or_config_file_that_is_not_yaml_is_one_paragraph(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Fuzzed inputs that escaped as yaml's ParserError."""
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("codec: [libx264\n")
+    argv = [
+        "convert",
+        "--glob",
+        str(tmp_path / "*.mcap"),
+        "--contract",
+        str(SAMPLE_CONTRACT),
+        "--output",
+        "o",
+    ]
+    assert main([*argv, "--codec", str(broken)]) == 2
+    err = capfd.readouterr().err
+    assert (
+        f"--codec {broken}: {broken} is not valid YAML at line 2, column 1" in err and "Traceback" not in err
+    )
+    assert main(["convert", "--config", str(broken)]) == 2
+    assert f"--config: {broken} is not valid YAML at line 2" in capfd.readouterr().err
+
+
+def test_a_qa_report_that_cannot_be_written_is_one_paragraph_after_the_scores(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    write_episode_bag(tmp_path / "ep", "mcap", EpisodeSpec(duration_s=1.0))
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text("bags:\n  - uri: ep\n")
+    report = tmp_path / "missing" / "report.html"
+    argv = ["qa", "--manifest", str(manifest), "--contract", str(SAMPLE_CONTRACT), "--report", str(report)]
+    assert main(argv) == 2
+    out, err = capfd.readouterr()
+    assert "bags[0]" in out  # the scores were printed first
+    assert f"--report {report}: cannot be written (No such file or directory); the scores above" in err
+    assert "Traceback" not in err

@@ -72,24 +72,42 @@ def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
         )
     if path.is_file():
         return _file_storage(path, uri)
+    if not path.is_dir():
+        raise BagReadError(
+            "is neither a file nor a folder (a device, a pipe or a socket)",
+            uri=uri,
+            fix="point the manifest at a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag.",
+        )
     metadata = path / "metadata.yaml"
     if metadata.is_file():
         try:
             info = parse_metadata(metadata.read_text()) or {}
             storage_id = str(info.get("rosbag2_bagfile_information", {}).get("storage_identifier", ""))
+        except UnicodeDecodeError as err:
+            raise BagReadError(
+                f"metadata.yaml is not text (a byte at offset {err.start} is not UTF-8)",
+                uri=uri,
+                fix="repair metadata.yaml (`ros2 bag reindex`) or delete it to read the data files present.",
+            ) from err
         except (yaml.YAMLError, OSError, AttributeError) as err:
             raise BagReadError(
                 f"metadata.yaml is unreadable ({err})", uri=uri, fix="re-index the bag."
             ) from err
     else:
         storage_id = ""
-    files = sorted(
-        (p for p in path.iterdir() if p.suffix in (".mcap", ".db3") and p.is_file()), key=lambda p: p.name
-    )
+    try:
+        listed: list[Path | RemotePath] = list(path.iterdir())
+    except OSError as err:
+        raise BagReadError(
+            f"is a folder that cannot be listed ({err.strerror or err})",
+            uri=uri,
+            fix="give bagport's user read access to the folder, or copy the bag somewhere it can read.",
+        ) from err
+    files = sorted((p for p in listed if p.suffix in (".mcap", ".db3") and p.is_file()), key=lambda p: p.name)
     if not files and storage_id in (Storage.MCAP, Storage.SQLITE3):
         return Storage(storage_id)  # files compressed whole (.mcap.zstd): their content cannot tell
     if not files:
-        ros1 = sorted(p.name for p in path.iterdir() if p.suffix == ".bag" and p.is_file())
+        ros1 = sorted(p.name for p in listed if p.suffix == ".bag" and p.is_file())
         if ros1:
             raise BagReadError(
                 f"is a folder of {len(ros1)} ROS 1 bag(s) ({', '.join(ros1[:5])}{', ...' if len(ros1) > 5 else ''}), "

@@ -20,7 +20,7 @@ from typing import Any
 import yaml
 
 from bagport.bags.detect import storage_by_content
-from bagport.bags.metadata_yaml import parse_metadata
+from bagport.bags.metadata_yaml import metadata_type_problem, parse_metadata
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
@@ -70,15 +70,19 @@ def _metadata(folder: BagPath, uri: str) -> dict[str, Any] | None:
     metadata = folder / "metadata.yaml"
     if not metadata.is_file():
         return None
+    fix = "repair metadata.yaml (`ros2 bag reindex`) or delete it to read the data files present."
     try:
-        info = parse_metadata(metadata.read_text()) or {}
-        return dict(info.get("rosbag2_bagfile_information") or {})
-    except (yaml.YAMLError, OSError, AttributeError, TypeError, ValueError) as err:
+        info = (parse_metadata(metadata.read_text()) or {}).get("rosbag2_bagfile_information") or {}
+    except UnicodeDecodeError as err:
         raise BagReadError(
-            f"metadata.yaml is unreadable ({err})",
-            uri=uri,
-            fix="repair metadata.yaml (`ros2 bag reindex`) or delete it to read the data files present.",
+            f"metadata.yaml is not text (a byte at offset {err.start} is not UTF-8)", uri=uri, fix=fix
         ) from err
+    except (yaml.YAMLError, OSError, AttributeError, TypeError, ValueError) as err:
+        raise BagReadError(f"metadata.yaml is unreadable ({err})", uri=uri, fix=fix) from err
+    problem = metadata_type_problem(info)
+    if problem is not None:
+        raise BagReadError(f"metadata.yaml is damaged or edited: {problem}", uri=uri, fix=fix)
+    return dict(info)
 
 
 def _listed(metadata: dict[str, Any]) -> list[str]:

@@ -28,7 +28,7 @@ from ruamel.yaml.error import YAMLError
 
 from bagport.yamlsource import load_plain
 
-__all__ = ["RosbagsMetadataYAML", "parse_metadata", "serve_rosbags"]
+__all__ = ["RosbagsMetadataYAML", "metadata_type_problem", "parse_metadata", "serve_rosbags"]
 
 
 @functools.lru_cache(maxsize=8)
@@ -58,3 +58,33 @@ class RosbagsMetadataYAML:
 def serve_rosbags() -> None:
     """Make rosbags' folder reader parse ``metadata.yaml`` through :class:`RosbagsMetadataYAML`."""
     rosbags.rosbag2.reader.YAML = RosbagsMetadataYAML  # type: ignore[attr-defined,assignment]
+
+
+def _whole(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def metadata_type_problem(info: Any) -> str | None:
+    """What in a parsed ``rosbag2_bagfile_information`` does not have the type rosbag2 writes (a list of file
+    names, whole numbers for counts and times), or ``None``: an edited or damaged file, said before a reader
+    fails on it with a bare ``TypeError``."""
+    if not isinstance(info, dict):
+        return f"rosbag2_bagfile_information is a {type(info).__name__}, not a mapping"
+    files = info.get("relative_file_paths")
+    if files is not None and not (isinstance(files, list) and all(isinstance(f, str) for f in files)):
+        return f"relative_file_paths is {files!r}, not a list of file names"
+    if "message_count" in info and not _whole(info["message_count"]):
+        return f"message_count is {info['message_count']!r}, not a whole number"
+    for key, field in (("starting_time", "nanoseconds_since_epoch"), ("duration", "nanoseconds")):
+        value = info.get(key)
+        if value is not None and not (isinstance(value, dict) and _whole(value.get(field))):
+            return f"{key} is {value!r}, not {{{field}: <a whole number>}}"
+    topics = info.get("topics_with_message_count") or []
+    if not isinstance(topics, list):
+        return f"topics_with_message_count is {topics!r}, not a list"
+    for n, topic in enumerate(topics):
+        if not (isinstance(topic, dict) and isinstance(topic.get("topic_metadata"), dict)):
+            return f"topics_with_message_count[{n}] is {topic!r}, not {{topic_metadata: ..., message_count: ...}}"
+        if not _whole(topic.get("message_count")):
+            return f"topics_with_message_count[{n}].message_count is {topic.get('message_count')!r}, not a whole number"
+    return None

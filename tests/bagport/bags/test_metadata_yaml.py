@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -11,6 +13,7 @@ from ruamel.yaml import YAML
 
 from bagport.bags import metadata_yaml, open_bag
 from bagport.bags.metadata_yaml import RosbagsMetadataYAML, parse_metadata
+from bagport.errors import BagReadError
 from bagport.synth import EpisodeSpec, write_episode_bag
 from tests.helpers import REALBAGS
 
@@ -49,3 +52,41 @@ def test_unparsable_metadata_is_still_rosbags_reader_error(tmp_path: Path) -> No
     (folder / "metadata.yaml").write_text("rosbag2_bagfile_information: [unclosed\n")
     with pytest.raises(ReaderError, match="Could not load YAML"), Reader(folder):
         pass
+
+
+@pytest.mark.parametrize(
+    ("edit", "said"),
+    [
+        (
+            lambda text: b"\xff\xfe" + text.encode(),
+            "metadata.yaml is not text (a byte at offset 0 is not UTF-8)",
+        ),
+        (
+            lambda text: re.sub(
+                r"relative_file_paths:\n(\s+- .*\n)+", "relative_file_paths: 5\n", text
+            ).encode(),
+            "metadata.yaml is damaged or edited: relative_file_paths is 5, not a list of file names",
+        ),
+        (
+            lambda text: re.sub(r"(?m)^  message_count: \d+", "  message_count: abc", text).encode(),
+            "metadata.yaml is damaged or edited: message_count is 'abc', not a whole number",
+        ),
+    ],
+    ids=["not-text", "files-not-a-list", "count-not-a-number"],
+)
+def test_a_metadata_yaml_of_the_wrong_types_is_one_paragraph(
+    tmp_path: Path, edit: Callable[[str], bytes], said: str
+) -> None:
+    """Fuzzed inputs that escaped as a UnicodeDecodeError or a TypeError from deep in the reader."""
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5, cameras=()))
+    metadata = bag / "metadata.yaml"
+    metadata.write_bytes(edit(metadata.read_text()))
+    with pytest.raises(BagReadError, match=re.escape(said)) as caught:
+        open_bag(str(bag))
+    assert "Fix: repair metadata.yaml (`ros2 bag reindex`) or delete it" in str(caught.value)
+
+
+def test_a_device_is_no_bag() -> None:
+    with pytest.raises(BagReadError, match="is neither a file nor a folder"):
+        open_bag("/dev/null")

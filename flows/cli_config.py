@@ -33,9 +33,14 @@ def load_encoder(value: str | None) -> dict[str, Any]:
         return default_encoder()
     path = Path(value)
     if not path.is_file():
-        preset = Path(__file__).resolve().parent.parent / "configs" / "codecs" / f"{value}.yaml"
-        if not preset.is_file():
-            raise BagportError(f"--codec {value!r}: no such file and no preset configs/codecs/{value}.yaml")
+        codecs = Path(__file__).resolve().parent.parent / "configs" / "codecs"
+        preset = codecs / f"{value}.yaml"
+        if "/" in value or not preset.is_file():
+            presets = ", ".join(sorted(p.stem for p in codecs.glob("*.yaml")))
+            raise BagportError(
+                f"--codec {value}: no such file, and no preset of that name. Fix: give a preset ({presets}) "
+                "or the path of a YAML file of encoder settings."
+            )
         path = preset
     data = _yaml_file(path, f"--codec {value}") or {}
     if not isinstance(data, dict):

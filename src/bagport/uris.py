@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import fsspec
 from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
@@ -62,7 +64,23 @@ def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:
             f"{what} {uri}: fsspec cannot open it ({err}); nothing was converted or written. Fix: a local "
             "path, or a URI fsspec knows (s3://, gs://, ...) with its package installed (s3fs, gcsfs, ...)."
         ) from err
+    if is_local(fs):
+        _refuse_under_a_file(Path(str(path)), uri, what)
     return fs, str(path)
+
+
+def _refuse_under_a_file(path: Path, uri: str, what: str) -> None:
+    """A local output or staging store that is a file, or lies under one: every episode would fail to stage
+    with a bare ``NotADirectoryError``; said once, before anything converts."""
+    for folder in (path, *path.parents):
+        if folder.exists():
+            if folder.is_dir():
+                return
+            where = "is a file" if folder == path else f"lies under {folder}, which is a file"
+            raise DatasetWriteError(
+                f"{what} {uri} {where}; nothing was converted or written. Fix: give a folder path (one that "
+                "does not exist yet is made)."
+            )
 
 
 def require_bucket(fs: AbstractFileSystem, path: str, uri: str) -> None:

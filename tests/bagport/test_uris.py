@@ -85,3 +85,18 @@ def test_a_small_file_that_is_not_text_or_not_a_file_is_one_paragraph(tmp_path: 
 def test_an_output_on_a_protocol_fsspec_does_not_know_is_one_paragraph() -> None:
     with pytest.raises(DatasetWriteError, match=r"--output bogus://x/y: fsspec cannot open it .*nothing was"):
         output_fs("bogus://x/y", "--output")
+
+
+def test_a_local_output_or_staging_that_is_or_lies_under_a_file_is_refused_before_converting(
+    tmp_path: Path,
+) -> None:
+    """Each episode failed to stage with a bare NotADirectoryError; now said once, at the plan."""
+    a_file = tmp_path / "notes.txt"
+    a_file.write_text("x")
+    with pytest.raises(
+        DatasetWriteError, match=rf"--output {a_file}/ds lies under {a_file}, which is a file"
+    ):
+        output_fs(str(a_file / "ds"), "--output")
+    with pytest.raises(DatasetWriteError, match=rf"--staging {a_file} is a file; nothing was converted"):
+        output_fs(str(a_file), "--staging")
+    assert output_fs(str(tmp_path / "new" / "ds"), "--output")[1] == str(tmp_path / "new" / "ds")

@@ -264,6 +264,11 @@ def test_a_codec_or_config_file_that_is_not_yaml_is_one_paragraph(
     )
     assert main(["convert", "--config", str(broken)]) == 2
     assert f"--config: {broken} is not valid YAML at line 2" in capfd.readouterr().err
+    assert main([*argv, "--codec", str(tmp_path / "missing.yaml")]) == 2
+    assert (
+        "no such file, and no preset of that name. Fix: give a preset (archival, h264-fast, lerobot-default)"
+        in (capfd.readouterr().err)
+    )
 
 
 def test_a_qa_report_that_cannot_be_written_is_one_paragraph_after_the_scores(

@@ -70,7 +70,6 @@ class ConvertConfig(BaseModel):
     )
     contract: str = Field(description="contract YAML (Rosetta-compatible); required (here or in --config)")
     output: str = Field(
-        min_length=1,
         description="the dataset folder itself (LeRobot's root), local or any fsspec URI (s3://...); it must "
         "not exist unless --overwrite or --append; required (here or in --config)",
     )

@@ -57,6 +57,10 @@ def read_text(uri: str, what: str) -> str:
 def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:
     """fsspec's file system and path for an output or staging ``uri`` (``what``: its option); a protocol
     fsspec does not know (a typo, or its package not installed) is one paragraph."""
+    if not uri.strip():
+        raise DatasetWriteError(
+            f"{what} is empty; nothing was converted or written. Fix: give the dataset's folder or URI."
+        )
     try:
         fs, path = url_to_fs(uri)
     except (ValueError, ImportError) as err:

@@ -100,3 +100,5 @@ def test_a_local_output_or_staging_that_is_or_lies_under_a_file_is_refused_befor
     with pytest.raises(DatasetWriteError, match=rf"--staging {a_file} is a file; nothing was converted"):
         output_fs(str(a_file), "--staging")
     assert output_fs(str(tmp_path / "new" / "ds"), "--output")[1] == str(tmp_path / "new" / "ds")
+    with pytest.raises(DatasetWriteError, match="--output is empty; nothing was converted"):
+        output_fs("", "--output")  # it said "error:  already exists"

@@ -71,7 +71,7 @@ class ConvertConfig(BaseModel):
     contract: str = Field(description="contract YAML (Rosetta-compatible); required (here or in --config)")
     output: str = Field(
         description="the dataset folder itself (LeRobot's root), local or any fsspec URI (s3://...); it must "
-        "not exist unless --overwrite or --append; required (here or in --config)",
+        "not exist unless --overwrite or --append; required (here or in --config)"
     )
     repo_id: str | None = Field(
         default=None, description="LeRobot repo id recorded for the dataset (default: local/<name of OUT>)"

@@ -15,9 +15,8 @@ from fsspec.core import url_to_fs
 
 from bagport import __version__
 from bagport.bags import source_stamp
-from bagport.dataset import DatasetLimits, DatasetReport
+from bagport.dataset import DatasetLimits, DatasetReport, write_dataset
 from bagport.dataset.history import dataset_report, record_exclusions
-from bagport.dataset.write import dataset_written
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import DatasetWriteError
 from bagport.formats import write_formats
@@ -238,7 +237,7 @@ def reduce_run(
         return start
     if "lerobot" not in plan.config.formats:
         return commit_reduce(plan, staged, start, None)
-    with dataset_written(
+    return write_dataset(
         start.kept,
         plan.config.output,
         robot_type=plan.contract.robot_type,
@@ -249,8 +248,8 @@ def reduce_run(
         qa_config=plan.qa.model_dump(mode="json"),
         append=plan.config.append,
         expect_episodes=plan.dataset_episodes,
-    ) as lerobot:
-        return commit_reduce(plan, staged, start, lerobot)
+        then=lambda lerobot: commit_reduce(plan, staged, start, lerobot),
+    )
 
 
 def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:

@@ -11,12 +11,11 @@ from pathlib import Path
 import pytest
 
 import bagport.dataset.publish
-from bagport.dataset import write_dataset
+from bagport.dataset import DatasetReport, write_dataset
 from bagport.dataset.crashpoints import set_hook
 from bagport.dataset.publish import exchange
 from bagport.dataset.repair import repair_dataset
 from bagport.dataset.validate import validate_dataset
-from bagport.dataset.write import dataset_written
 from bagport.errors import DatasetWriteError
 from bagport.staging import EpisodeSummary
 
@@ -120,9 +119,9 @@ def test_the_output_stays_held_after_its_commit_until_the_write_ends(
     if mode != "first":
         write_dataset(staged[:1], str(out), robot_type="r")
     episodes = staged[1:] if mode == "append" else staged
-    with dataset_written(
-        episodes, str(out), robot_type="r", overwrite=mode == "overwrite", append=mode == "append"
-    ) as report:
+    checked: list[int] = []
+
+    def after_commit(report: DatasetReport) -> DatasetReport:
         assert (
             report.episodes == 2 and json.loads((out / "meta/info.json").read_text())["total_episodes"] == 2
         )
@@ -130,6 +129,18 @@ def test_the_output_stays_held_after_its_commit_until_the_write_ends(
             repair_dataset(str(out))
         with pytest.raises(DatasetWriteError, match="another bagport run is writing"):
             write_dataset(staged, str(out), robot_type="r", overwrite=True)
+        checked.append(report.episodes)
+        return report
+
+    write_dataset(
+        episodes,
+        str(out),
+        robot_type="r",
+        overwrite=mode == "overwrite",
+        append=mode == "append",
+        then=after_commit,
+    )
+    assert checked == [2]  # the checks above ran, after the commit and before the write ended
     assert repair_dataset(str(out)).actions == ()  # nothing left to recover: the write ended whole
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
     assert validate_dataset(out, decode_every=1000).episodes == 2

@@ -4,9 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
-
-from bagport.bags.metadata_yaml import parse_metadata
+from bagport.bags.metadata_yaml import read_metadata
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
@@ -78,23 +76,8 @@ def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
             uri=uri,
             fix="point the manifest at a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag.",
         )
-    metadata = path / "metadata.yaml"
-    if metadata.is_file():
-        try:
-            info = parse_metadata(metadata.read_text()) or {}
-            storage_id = str(info.get("rosbag2_bagfile_information", {}).get("storage_identifier", ""))
-        except UnicodeDecodeError as err:
-            raise BagReadError(
-                f"metadata.yaml is not text (a byte at offset {err.start} is not UTF-8)",
-                uri=uri,
-                fix="repair metadata.yaml (`ros2 bag reindex`) or delete it to read the data files present.",
-            ) from err
-        except (yaml.YAMLError, OSError, AttributeError) as err:
-            raise BagReadError(
-                f"metadata.yaml is unreadable ({err})", uri=uri, fix="re-index the bag."
-            ) from err
-    else:
-        storage_id = ""
+    info = read_metadata(path, uri) or {}
+    storage_id = str(info.get("storage_identifier", ""))
     try:
         listed: list[Path | RemotePath] = list(path.iterdir())
     except OSError as err:

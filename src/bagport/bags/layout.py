@@ -17,10 +17,8 @@ from dataclasses import dataclass, field
 from pathlib import Path, PurePath
 from typing import Any
 
-import yaml
-
 from bagport.bags.detect import storage_by_content
-from bagport.bags.metadata_yaml import metadata_type_problem, parse_metadata
+from bagport.bags.metadata_yaml import read_metadata
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
@@ -64,25 +62,6 @@ def _alias(path: BagPath, name: str, scratch: Callable[[], Path]) -> Any:
 def _data_files(folder: BagPath) -> list[BagPath]:
     files = [p for p in folder.iterdir() if p.name.endswith(_DATA_SUFFIXES) and p.is_file()]
     return sorted(files, key=_natural_key)
-
-
-def _metadata(folder: BagPath, uri: str) -> dict[str, Any] | None:
-    metadata = folder / "metadata.yaml"
-    if not metadata.is_file():
-        return None
-    fix = "repair metadata.yaml (`ros2 bag reindex`) or delete it to read the data files present."
-    try:
-        info = (parse_metadata(metadata.read_text()) or {}).get("rosbag2_bagfile_information") or {}
-    except UnicodeDecodeError as err:
-        raise BagReadError(
-            f"metadata.yaml is not text (a byte at offset {err.start} is not UTF-8)", uri=uri, fix=fix
-        ) from err
-    except (yaml.YAMLError, OSError, AttributeError, TypeError, ValueError) as err:
-        raise BagReadError(f"metadata.yaml is unreadable ({err})", uri=uri, fix=fix) from err
-    problem = metadata_type_problem(info)
-    if problem is not None:
-        raise BagReadError(f"metadata.yaml is damaged or edited: {problem}", uri=uri, fix=fix)
-    return dict(info)
 
 
 def _listed(metadata: dict[str, Any]) -> list[str]:
@@ -132,7 +111,7 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
         opened = path if path.suffix == suffix else _alias(path, f"bag{suffix}", scratch)
         return ReadPlan([opened], [path], [path])
     present = _data_files(path)
-    metadata = _metadata(path, uri)
+    metadata = read_metadata(path, uri)
     if metadata is not None:
         _refuse_missing_files(metadata, present, uri)
         problem = _metadata_problem(metadata, present, storage)

@@ -14,21 +14,29 @@ rosbag2's metadata alike (its keys, names, types, counts and QoS are strings, in
 that both spell the same way), and bagport's own reads came first and already decided what a
 recording's custom data says. A text libyaml cannot parse raises ruamel's ``YAMLError`` inside rosbags,
 which reports it as before (bagport's earlier reads of the same text report it first).
+
+bagport's three reads go through :func:`read_metadata`, so a file that is not UTF-8 text, not YAML or not
+of the types rosbag2 writes gets the same message whichever of them meets it first.
 """
 
 from __future__ import annotations
 
 import copy
 import functools
+from pathlib import Path
 from typing import Any
 
 import rosbags.rosbag2.reader
 import yaml
 from ruamel.yaml.error import YAMLError
 
+from bagport.bags.remote import RemotePath
+from bagport.errors import BagReadError
 from bagport.yamlsource import load_plain
 
-__all__ = ["RosbagsMetadataYAML", "metadata_type_problem", "parse_metadata", "serve_rosbags"]
+__all__ = ["RosbagsMetadataYAML", "parse_metadata", "read_metadata", "serve_rosbags"]
+
+_FIX = "repair metadata.yaml (`ros2 bag reindex`) or delete it to read the data files present."
 
 
 @functools.lru_cache(maxsize=8)
@@ -64,7 +72,7 @@ def _whole(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def metadata_type_problem(info: Any) -> str | None:
+def _type_problem(info: Any) -> str | None:
     """What in a parsed ``rosbag2_bagfile_information`` does not have the type rosbag2 writes (a list of file
     names, whole numbers for counts and times), or ``None``: an edited or damaged file, said before a reader
     fails on it with a bare ``TypeError``."""
@@ -88,3 +96,24 @@ def metadata_type_problem(info: Any) -> str | None:
         if not _whole(topic.get("message_count")):
             return f"topics_with_message_count[{n}].message_count is {topic.get('message_count')!r}, not a whole number"
     return None
+
+
+def read_metadata(folder: Path | RemotePath, uri: str) -> dict[str, Any] | None:
+    """The ``rosbag2_bagfile_information`` of ``folder``'s ``metadata.yaml`` (``{}`` when it has none), or
+    ``None`` when the folder has no ``metadata.yaml``. A file that is not UTF-8 text, cannot be read or parsed,
+    or has values of other types than rosbag2 writes is a :class:`BagReadError` with one fix."""
+    metadata = folder / "metadata.yaml"
+    if not metadata.is_file():
+        return None
+    try:
+        info = (parse_metadata(metadata.read_text()) or {}).get("rosbag2_bagfile_information") or {}
+    except UnicodeDecodeError as err:
+        raise BagReadError(
+            f"metadata.yaml is not text (a byte at offset {err.start} is not UTF-8)", uri=uri, fix=_FIX
+        ) from err
+    except (yaml.YAMLError, OSError, AttributeError, TypeError, ValueError) as err:
+        raise BagReadError(f"metadata.yaml is unreadable ({err})", uri=uri, fix=_FIX) from err
+    problem = _type_problem(info)
+    if problem is not None:
+        raise BagReadError(f"metadata.yaml is damaged or edited: {problem}", uri=uri, fix=_FIX)
+    return dict(info)

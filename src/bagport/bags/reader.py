@@ -11,7 +11,6 @@ from pathlib import Path
 from types import TracebackType
 from typing import Any, Protocol
 
-import yaml
 from backports import zstd
 from fsspec.core import url_to_fs
 from rosbags.interfaces import Nodetype
@@ -25,7 +24,7 @@ from bagport.bags.download import download_bag
 from bagport.bags.indexcount import index_time_range, window_counts
 from bagport.bags.layout import BagPath, ReadPlan, plan_reads
 from bagport.bags.message import BagMessage, HeaderLayout
-from bagport.bags.metadata_yaml import parse_metadata
+from bagport.bags.metadata_yaml import read_metadata
 from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
@@ -80,16 +79,11 @@ class BagReader(Protocol):
     ) -> None: ...
 
 
-def _custom_data(path: BagPath) -> dict[str, str]:
-    metadata = path / "metadata.yaml" if path.is_dir() else None
-    if metadata is None or not metadata.is_file():
-        return {}
-    try:
-        info = parse_metadata(metadata.read_text()) or {}
-        data = info.get("rosbag2_bagfile_information", {}).get("custom_data") or {}
-    except (yaml.YAMLError, OSError, AttributeError):
-        return {}
-    return {str(k): str(v) for k, v in dict(data).items()}
+def _custom_data(path: BagPath, uri: str) -> dict[str, str]:
+    """``metadata.yaml``'s ``custom_data``, ``{}`` when there is none or it is not a mapping (the layout has
+    read the file already and refused one it cannot use)."""
+    data = (read_metadata(path, uri) or {}).get("custom_data")
+    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
 
 
 class RosbagsReader:
@@ -186,7 +180,7 @@ class RosbagsReader:
             end_ns=end_ns,
             message_count=message_count,
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
-            custom_data=_custom_data(path),
+            custom_data=_custom_data(path, self._uri),
             checksums=bag_checksums(storage, plan.data_files),
             warnings=(*plan.warnings, *self._reader.warnings(), *stale),
             listed_span_ns=listed_ns if stale else None,

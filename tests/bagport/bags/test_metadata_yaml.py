@@ -11,7 +11,8 @@ import rosbags.rosbag2.reader
 from rosbags.rosbag2 import Reader, ReaderError
 from ruamel.yaml import YAML
 
-from bagport.bags import metadata_yaml, open_bag
+from bagport.bags import Storage, detect_storage, metadata_yaml, open_bag
+from bagport.bags.layout import plan_reads
 from bagport.bags.metadata_yaml import RosbagsMetadataYAML, parse_metadata
 from bagport.errors import BagReadError
 from bagport.synth import EpisodeSpec, write_episode_bag
@@ -54,13 +55,14 @@ def test_unparsable_metadata_is_still_rosbags_reader_error(tmp_path: Path) -> No
         pass
 
 
-@pytest.mark.parametrize(
+BAD_METADATA = pytest.mark.parametrize(
     ("edit", "said"),
     [
         (
             lambda text: b"\xff\xfe" + text.encode(),
             "metadata.yaml is not text (a byte at offset 0 is not UTF-8)",
         ),
+        (lambda text: (text + "oops: [unclosed\n").encode(), "metadata.yaml is unreadable (while parsing"),
         (
             lambda text: re.sub(
                 r"relative_file_paths:\n(\s+- .*\n)+", "relative_file_paths: 5\n", text
@@ -72,19 +74,39 @@ def test_unparsable_metadata_is_still_rosbags_reader_error(tmp_path: Path) -> No
             "metadata.yaml is damaged or edited: message_count is 'abc', not a whole number",
         ),
     ],
-    ids=["not-text", "files-not-a-list", "count-not-a-number"],
+    ids=["not-text", "not-yaml", "files-not-a-list", "count-not-a-number"],
 )
+
+
+def _bag_with_metadata(folder: Path, edit: Callable[[str], bytes]) -> Path:
+    write_episode_bag(folder, "mcap", EpisodeSpec(duration_s=0.5, cameras=()))
+    metadata = folder / "metadata.yaml"
+    metadata.write_bytes(edit(metadata.read_text()))
+    return folder
+
+
+@BAD_METADATA
 def test_a_metadata_yaml_of_the_wrong_types_is_one_paragraph(
     tmp_path: Path, edit: Callable[[str], bytes], said: str
 ) -> None:
     """Fuzzed inputs that escaped as a UnicodeDecodeError or a TypeError from deep in the reader."""
-    bag = tmp_path / "ep"
-    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.5, cameras=()))
-    metadata = bag / "metadata.yaml"
-    metadata.write_bytes(edit(metadata.read_text()))
+    bag = _bag_with_metadata(tmp_path / "ep", edit)
     with pytest.raises(BagReadError, match=re.escape(said)) as caught:
         open_bag(str(bag))
     assert "Fix: repair metadata.yaml (`ros2 bag reindex`) or delete it" in str(caught.value)
+
+
+@BAD_METADATA
+def test_detection_and_layout_say_the_same_of_a_bad_metadata_yaml(
+    tmp_path: Path, edit: Callable[[str], bytes], said: str
+) -> None:
+    """Whichever reads ``metadata.yaml`` first says the same (detection said other words and fix before)."""
+    bag = _bag_with_metadata(tmp_path / "ep", edit)
+    with pytest.raises(BagReadError, match=re.escape(said)) as detected:
+        detect_storage(bag, "ep")
+    with pytest.raises(BagReadError) as planned:
+        plan_reads(bag, Storage.MCAP, lambda: tmp_path, "ep")
+    assert str(planned.value) == str(detected.value)
 
 
 def test_a_device_is_no_bag() -> None:

@@ -20,7 +20,6 @@ import posixpath
 from dataclasses import dataclass, field
 from typing import Any
 
-import fsspec
 import pydantic
 import yaml
 from fsspec.core import url_to_fs
@@ -29,7 +28,7 @@ from pydantic import JsonValue
 from bagport.errors import ManifestError
 from bagport.manifest_csv import csv_entries
 from bagport.timewindow import WHOLE_BAG, TimeWindow
-from bagport.uris import is_local, protocol_of
+from bagport.uris import is_local, protocol_of, read_text_file
 from bagport.yamlsource import YamlJson, explain_validation, load_yaml, primary_error
 
 __all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
@@ -228,20 +227,12 @@ def parse_manifest(
 
 def load_manifest(uri: str, *, storage_options: dict[str, Any] | None = None) -> Manifest:
     """Read a manifest from a local path or any fsspec URI."""
-    try:
-        with fsspec.open(uri, "r", encoding="utf-8", **(storage_options or {})) as handle:
-            text = str(handle.read())
-    except FileNotFoundError as err:
-        raise ManifestError("file does not exist", file=uri, fix="check the --manifest path.") from err
-    except UnicodeDecodeError as err:
-        raise ManifestError(
-            f"is not UTF-8 text (the byte at offset {err.start} is not)",
-            file=uri,
-            fix="save it as UTF-8 (from Latin-1: `iconv -f latin1 -t utf-8 OLD > NEW`).",
-        ) from err
-    except OSError as err:
-        raise ManifestError(
-            f"cannot be read ({err.strerror or err})", file=uri, fix="check the --manifest path."
-        ) from err
+    text = read_text_file(
+        uri,
+        error=ManifestError,
+        subject="file",
+        fix="check the --manifest path.",
+        storage_options=storage_options,
+    )
     base_dir = posixpath.dirname(uri) if _is_url(uri) else posixpath.dirname(posixpath.abspath(uri))
     return parse_manifest(text, uri, base_dir=base_dir, storage_options=storage_options)

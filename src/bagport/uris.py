@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import fsspec
 from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 
-from bagport.errors import ContractError, DatasetWriteError
+from bagport.errors import ContractError, DatasetWriteError, ManifestError
 
-__all__ = ["is_local", "output_fs", "protocol_of", "read_text", "require_bucket"]
+__all__ = ["is_local", "output_fs", "protocol_of", "read_text", "read_text_file", "require_bucket"]
 
 BUCKET_STORES = frozenset({"s3", "s3a", "gs", "gcs", "abfs", "abfss", "az", "adl"})
 """Object stores whose first path component is a bucket (container) that writing would create."""
@@ -28,30 +30,45 @@ def is_local(fs: AbstractFileSystem) -> bool:
     return "file" in names or "local" in names
 
 
-def read_text(uri: str, what: str) -> str:
-    """A small text file (contract, QA thresholds) from a local path or any fsspec URI."""
+_UTF8_FIX = "save it as UTF-8 (from Latin-1: `iconv -f latin1 -t utf-8 OLD > NEW`)."
+
+
+def read_text_file(
+    uri: str,
+    *,
+    error: type[ContractError] | type[ManifestError],
+    subject: str,
+    fix: str,
+    missing_fix: str | None = None,
+    storage_options: Mapping[str, Any] | None = None,
+) -> str:
+    """A small UTF-8 text file from a local path or any fsspec URI. One that is missing, not UTF-8 or cannot
+    be read is an ``error`` at ``uri`` that calls it ``subject`` (``contract file``), with ``fix`` (or
+    ``missing_fix`` when it does not exist)."""
     try:
-        with fsspec.open(uri, "r", encoding="utf-8") as handle:
+        with fsspec.open(uri, "r", encoding="utf-8", **(storage_options or {})) as handle:
             return str(handle.read())
     except FileNotFoundError as err:
-        raise ContractError(
-            f"{what} file does not exist",
-            file=uri,
-            fix=f"check the path given as --{what} (or {what}: in a --config file); a relative path is relative "
-            "to the working directory.",
-        ) from err
+        raise error(f"{subject} does not exist", file=uri, fix=missing_fix or fix) from err
     except UnicodeDecodeError as err:
-        raise ContractError(
-            f"{what} file is not UTF-8 text (the byte at offset {err.start} is not)",
-            file=uri,
-            fix="save it as UTF-8 (from Latin-1: `iconv -f latin1 -t utf-8 OLD > NEW`).",
+        raise error(
+            f"{subject} is not UTF-8 text (the byte at offset {err.start} is not)", file=uri, fix=_UTF8_FIX
         ) from err
     except OSError as err:
-        raise ContractError(
-            f"{what} file cannot be read ({err.strerror or err})",
-            file=uri,
-            fix=f"check the path given as --{what} (or {what}: in a --config file).",
-        ) from err
+        raise error(f"{subject} cannot be read ({err.strerror or err})", file=uri, fix=fix) from err
+
+
+def read_text(uri: str, what: str) -> str:
+    """A run's small text file (contract, QA thresholds), given as ``--{what}`` or ``{what}:`` in a
+    ``--config`` file: :func:`read_text_file` raising :class:`ContractError`."""
+    check = f"check the path given as --{what} (or {what}: in a --config file)"
+    return read_text_file(
+        uri,
+        error=ContractError,
+        subject=f"{what} file",
+        fix=f"{check}.",
+        missing_fix=f"{check}; a relative path is relative to the working directory.",
+    )
 
 
 def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import fsspec
 import pydantic
 import yaml
 
@@ -10,6 +9,7 @@ from bagport.contract.model import MAX_FPS, MAX_RESIZE_PX, Contract
 from bagport.contract.plan import ContractPlan, compile_contract
 from bagport.decode.custom import resolve_decoder
 from bagport.errors import ContractError
+from bagport.uris import read_text_file
 from bagport.yamlsource import explain_validation, load_yaml
 
 __all__ = ["load_contract", "parse_contract"]
@@ -23,16 +23,6 @@ _FIELD_FIXES = {
     "type": "write the ROS type as 'pkg/msg/Type', e.g. sensor_msgs/msg/JointState.",
     "topic": "ROS topic names are absolute: '/joint_states'.",
 }
-
-
-def _read_text(uri: str) -> str:
-    try:
-        with fsspec.open(uri, "r", encoding="utf-8") as handle:
-            return str(handle.read())
-    except FileNotFoundError as err:
-        raise ContractError("file does not exist", file=uri, fix="check the --contract path.") from err
-    except (OSError, UnicodeDecodeError) as err:
-        raise ContractError(f"cannot be read ({err})", file=uri, fix="check the --contract path.") from err
 
 
 def parse_contract(text: str, name: str = "contract") -> ContractPlan:
@@ -69,4 +59,5 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
 
 def load_contract(uri: str) -> ContractPlan:
     """Load a contract from a local path or any fsspec URI."""
-    return parse_contract(_read_text(uri), uri)
+    text = read_text_file(uri, error=ContractError, subject="file", fix="check the --contract path.")
+    return parse_contract(text, uri)

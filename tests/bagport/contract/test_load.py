@@ -179,6 +179,20 @@ def test_missing_contract_file() -> None:
         load_contract("/nonexistent/contract.yaml")
 
 
+def test_a_contract_file_not_text_or_a_folder_says_so_as_the_run_does(tmp_path: Path) -> None:
+    """``contract check`` reads the file as ``convert --contract`` does (it said a bare codec error)."""
+    latin1 = tmp_path / "c.yaml"
+    latin1.write_bytes("robot_type: bras\xe9\n".encode("latin-1"))
+    with pytest.raises(
+        ContractError, match=r"c\.yaml: file is not UTF-8 text \(the byte at offset 16 is not\).*iconv"
+    ):
+        load_contract(str(latin1))
+    with pytest.raises(
+        ContractError, match=r"file cannot be read \(Is a directory\) Fix: check the --contract path"
+    ):
+        load_contract(str(tmp_path))
+
+
 def test_episodes_section_and_default_task_are_optional_extensions() -> None:
     assert parse_contract(ROSETTA_README_EXAMPLE, "c.yaml").contract.episodes is None
     text = ROSETTA_README_EXAMPLE + (

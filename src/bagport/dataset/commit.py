@@ -211,7 +211,10 @@ def commit_write(
     if session.remote:
         with scratch_folder("meta") as scratch:
             report = _build_meta(scratch, session, summaries, placed, base, robot_type, extras)
-            publish_staged(scratch, session.output, session.staged, placed.digests, append=base is not None)
+            publish_staged(
+                scratch, session.output, session.staged, placed.digests,
+                append=base is not None, overwrite=session.overwrite,
+            )  # fmt: skip
         fs, root = url_to_fs(session.output)
         fs.invalidate_cache()
         return _sized(report, int(fs.du(root)))
@@ -223,7 +226,7 @@ def commit_write(
     report = _build_meta(build, session, summaries, placed, base, robot_type, extras)
     size = placed.size_bytes + _meta_size(build)
     if base is None:
-        swap_into_place(build, final)
+        swap_into_place(build, final, overwrite=session.overwrite)
         return _sized(report, size)
     commit_append(build, final, sorted(placed.digests))
     return _sized(report, sum(p.stat().st_size for p in final.rglob("*") if p.is_file()))

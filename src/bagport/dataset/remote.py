@@ -107,17 +107,34 @@ def recover_remote(output: str) -> list[str]:
     return [f"dropped a {journal.op} into {output} that was not committed; the previous version is unchanged"]
 
 
+def refuse_taken(fs: AbstractFileSystem, output: str, root: str, *, overwrite: bool) -> None:
+    """A first write (no ``overwrite``) finds the output as it began, without a dataset: one that another run
+    published meanwhile is refused, never replaced (an object store cannot make this check and the
+    commit one step, so two runs racing to the last moment are not caught; one run per output)."""
+    if overwrite or not fs.exists(f"{root}/{INFO_PATH}"):
+        return
+    raise DatasetWriteError(
+        f"{output} was created by another run while this one was writing (two runs with one --output); that "
+        "run's output is kept and this run's dataset was not published. Fix: add this run's bags to it with "
+        "--append (the episodes staged by this run are reused), or write to a new --output; one run at a time "
+        "per output."
+    )
+
+
 def publish_remote(
-    local: Path, output: str, upload: Sequence[str], remove: Sequence[str] = (), *, append: bool = False
+    local: Path, output: str, upload: Sequence[str], remove: Sequence[str] = (), *, overwrite: bool
 ) -> None:
     """Upload the files ``upload`` (relative to ``local``) to ``output`` and delete ``remove``, under the
-    intent record (see the module docstring)."""
+    intent record (see the module docstring); another run's output published there meanwhile is refused
+    unless ``overwrite``."""
     fs, root = url_to_fs(output)
     root = root.rstrip("/")
+    fs.invalidate_cache()
+    refuse_taken(fs, output, root, overwrite=overwrite)
     reached("s3.built")
     ordered = [rel for rel in upload if rel != INFO_PATH] + [INFO_PATH]
     journal = Journal(
-        op="append" if append else "publish",
+        op="publish",
         staged=STAGED_DIR.format(run_id=uuid.uuid4().hex[:8]),
         files=tuple(ordered),
         remove=tuple(remove),
@@ -165,7 +182,7 @@ def _removed(fs: AbstractFileSystem, root: str, keep: set[str]) -> list[str]:
 
 
 def publish_staged(
-    local: Path, output: str, staged: str, written: Mapping[str, str], *, append: bool
+    local: Path, output: str, staged: str, written: Mapping[str, str], *, append: bool, overwrite: bool
 ) -> None:
     """Commit a write whose data and video files (``written``: relative path -> digest) the file writers
     uploaded under ``<root>/<staged>/`` already: upload the ``meta/`` built in ``local`` there too, record
@@ -182,6 +199,8 @@ def publish_staged(
                 f"{output}/{rel} exists already: the dataset changed during the append; nothing was written. "
                 "Fix: run the append again (one append at a time per dataset)."
             )
+    if not append:
+        refuse_taken(fs, output, root, overwrite=overwrite)
     remove = () if append else tuple(_removed(fs, root, {*written, *meta}))
     reached("s3.built")
     journal = Journal(

@@ -66,7 +66,7 @@ def _a_dataset_or_empty(fs: AbstractFileSystem, path: str) -> bool:
     return bool(fs.exists(f"{path.rstrip('/')}/{INFO_PATH}")) or not fs.ls(path, detail=False)
 
 
-def publish_built[Report](output: str, build: Callable[[Path], Report]) -> Report:
+def publish_built[Report](output: str, build: Callable[[Path], Report], *, overwrite: bool) -> Report:
     """``build(root)`` writes the output's files under a fresh local ``root``; they replace ``output``
     whole (stale files of a replaced remote output removed), or nothing changes there."""
     fs, out_path = url_to_fs(output)
@@ -74,7 +74,7 @@ def publish_built[Report](output: str, build: Callable[[Path], Report]) -> Repor
         final = Path(out_path)
         with building_beside(final) as root:
             report = build(root)
-            swap_into_place(root, final)
+            swap_into_place(root, final, overwrite=overwrite)
         return report
     with scratch_folder("output") as scratch:
         root = scratch / "output"
@@ -84,5 +84,5 @@ def publish_built[Report](output: str, build: Callable[[Path], Report]) -> Repor
         existing = (
             {p[len(out_path.rstrip("/")) + 1 :] for p in fs.find(out_path)} if fs.exists(out_path) else set()
         )
-        publish_remote(root, output, files, sorted(existing - set(files)))
+        publish_remote(root, output, files, sorted(existing - set(files)), overwrite=overwrite)
     return report

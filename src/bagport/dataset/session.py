@@ -49,6 +49,9 @@ class WriteSession:
     remote: bool
     base: DatasetBase | None = None
     """What an append adds to, read once when the write opened (the commit checks it did not change)."""
+    overwrite: bool = False
+    """Whether the write may replace a dataset at the output (``--overwrite``); without it, one that another
+    run put there while this one wrote is refused at the commit, never replaced."""
 
     @property
     def staged(self) -> str:
@@ -151,7 +154,9 @@ def open_write(
     mode: Literal["publish", "append"] = "append" if appending else "publish"
     if is_local(fs):
         with building_beside(Path(out_path)) as build:
-            yield WriteSession(output, str(build), plan, features, mode, remote=False, base=base)
+            yield WriteSession(
+                output, str(build), plan, features, mode, remote=False, base=base, overwrite=overwrite
+            )
         return
     root = out_path.rstrip("/")
     staged = STAGED_DIR.format(run_id=uuid.uuid4().hex[:8])
@@ -159,8 +164,9 @@ def open_write(
     reached("s3.journaled")
     try:
         yield WriteSession(
-            output, fs.unstrip_protocol(f"{root}/{staged}"), plan, features, mode, remote=True, base=base
-        )
+            output, fs.unstrip_protocol(f"{root}/{staged}"), plan, features, mode,
+            remote=True, base=base, overwrite=overwrite,
+        )  # fmt: skip
     except Exception:  # a failure, not a kill (that is left to recovery): nothing of this write stays
         drop_staged(output, staged)
         raise

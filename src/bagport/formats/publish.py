@@ -26,4 +26,4 @@ def publish_built[Report](output: str, *, overwrite: bool, build: Callable[[Path
     """``build(root)`` writes the output's files under a fresh local ``root``; they replace ``output``
     whole, or nothing changes there."""
     check_output_free(output, overwrite=overwrite)
-    return publish_whole(output, build)
+    return publish_whole(output, build, overwrite=overwrite)

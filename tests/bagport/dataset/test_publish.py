@@ -144,3 +144,60 @@ def test_the_output_stays_held_after_its_commit_until_the_write_ends(
     assert repair_dataset(str(out)).actions == ()  # nothing left to recover: the write ended whole
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
     assert validate_dataset(out, decode_every=1000).episodes == 2
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {p.relative_to(root).as_posix(): p.read_bytes() for p in root.rglob("*") if p.is_file()}
+
+
+@pytest.mark.parametrize(
+    "step", ["local.publish.files", "local.publish.built"], ids=["while-building", "at-rename"]
+)
+def test_a_first_write_never_replaces_a_dataset_another_run_published_meanwhile(
+    staged: list[EpisodeSummary], tmp_path: Path, step: str
+) -> None:
+    """Two first writes to one --output that both passed the 'does it exist' check: the second to publish
+    is refused with a clear error and the first one's dataset stays whole (it was replaced without a
+    word), whether the other dataset appeared while this one built its meta/ or between the check and
+    the rename (a directory not empty)."""
+    out = tmp_path / "ds"
+    other = tmp_path / "other"
+    write_dataset(staged[:1], str(other), robot_type="r")
+    published = _files(other)
+
+    def another_run_publishes(reached_step: str) -> None:
+        if reached_step == step and not out.exists():
+            other.rename(out)
+
+    set_hook(another_run_publishes)
+    try:
+        with pytest.raises(
+            DatasetWriteError, match="created by another run while this one was writing"
+        ) as err:
+            write_dataset(staged, str(out), robot_type="r")
+    finally:
+        set_hook(None)
+    assert "--append" in str(err.value)
+    assert _files(out) == published
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]  # this run's build folder removed
+    assert validate_dataset(out, decode_every=1000).episodes == 1
+
+
+def test_an_overwrite_replaces_a_dataset_published_meanwhile_as_it_was_asked_to(
+    staged: list[EpisodeSummary], tmp_path: Path
+) -> None:
+    out = tmp_path / "ds"
+    other = tmp_path / "other"
+    write_dataset(staged[:1], str(other), robot_type="r")
+
+    def another_run_publishes(reached_step: str) -> None:
+        if reached_step == "local.publish.files" and not out.exists():
+            other.rename(out)
+
+    set_hook(another_run_publishes)
+    try:
+        write_dataset(staged, str(out), robot_type="r", overwrite=True)
+    finally:
+        set_hook(None)
+    assert validate_dataset(out, decode_every=1000).episodes == 2
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]

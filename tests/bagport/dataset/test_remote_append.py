@@ -11,8 +11,10 @@ import s3fs
 
 import bagport.dataset.remote
 from bagport.config import ConvertConfig
+from bagport.dataset.crashpoints import set_hook
 from bagport.dataset.remote import recover_remote
 from bagport.dataset.validate import validate_dataset
+from bagport.errors import DatasetWriteError
 from bagport.reduce import reduce_run
 from bagport.run import plan_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
@@ -169,3 +171,29 @@ def test_a_crashed_publish_of_an_older_bagport_is_rolled_back(
         "rolled back a publish into fleet/legacy left by an older bagport (its .append-journal.json)"
     ]
     assert _etags(s3, "fleet/legacy") == previous
+
+
+def test_a_first_write_on_s3_never_replaces_a_dataset_another_run_published_meanwhile(
+    bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path
+) -> None:
+    """Without --overwrite, a dataset that appeared at the output while this run wrote (another run with the
+    same --output) is refused at the commit: its objects stay as they are and this run's uploads go."""
+    (bags / "manifest-raced.yaml").write_text("bags:\n  - uri: a\n")
+    config = ConvertConfig(
+        manifest=str(bags / "manifest-raced.yaml"), contract=str(SAMPLE_CONTRACT), output="s3://fleet/raced",
+        encoder=FAST_CODEC, staging=str(tmp_path / "staging"),
+    )  # fmt: skip
+    plan = plan_run(config)
+    staged = stage_all(plan)
+
+    def another_run_publishes(step: str) -> None:
+        if step == "s3.files":
+            s3.pipe("fleet/raced/meta/info.json", b'{"codebase_version": "v3.0"}')
+
+    set_hook(another_run_publishes)
+    try:
+        with pytest.raises(DatasetWriteError, match="created by another run while this one was writing"):
+            reduce_run(plan, staged)
+    finally:
+        set_hook(None)
+    assert sorted(_etags(s3, "fleet/raced")) == ["meta/info.json"]

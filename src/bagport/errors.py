@@ -15,6 +15,7 @@ __all__ = [
     "ContractError",
     "DatasetWriteError",
     "DecodeError",
+    "EncoderSettingsError",
     "ManifestError",
     "PushError",
     "QualityError",
@@ -146,6 +147,16 @@ class AlignmentError(BagportError):
 
 class VideoError(BagportError):
     """Encoding, remuxing or decoding a video failed."""
+
+
+class EncoderSettingsError(VideoError):
+    """The encoder refused its settings (the codec, an option, the pixel format) when it opened."""
+
+    def __init__(self, message: str, *, codec: str, detail: str) -> None:
+        self.codec = codec
+        self.detail = detail
+        """What FFmpeg or PyAV said, without the clip's path."""
+        super().__init__(message)
 
 
 class DatasetWriteError(BagportError):

@@ -16,7 +16,7 @@ from bagport import __version__
 from bagport.append_plan import bags_to_append, check_append_fits
 from bagport.bags import read_msg_path, source_stamp
 from bagport.config import ConvertConfig
-from bagport.contract import ContractPlan, parse_contract
+from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.dataset import DatasetReport
 from bagport.dataset.history import dataset_bags, recorded_failures, recorded_write_key
 from bagport.dataset.repair import repair_dataset
@@ -26,10 +26,12 @@ from bagport.episode.staged import PlannedEpisode, list_staged, remove_finished_
 from bagport.formats import check_format_outputs
 from bagport.manifest import BagEntry, Manifest, load_manifest, parse_manifest
 from bagport.qa import QAConfig, load_qa_config
+from bagport.scratch import scratch_folder
 from bagport.segment import segment_request, segments_bags
 from bagport.selection import EpisodeFailure
 from bagport.uris import is_local, output_fs, read_text, require_bucket
 from bagport.video import EncoderSettings
+from bagport.video.encode import check_encoder
 from bagport.window_overlaps import WindowOverlap, window_overlaps
 
 __all__ = [
@@ -145,7 +147,11 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         dataset_episodes=dataset_episodes, staging_removed=removed,
         overlaps=window_overlaps(bags, held, whole_bag_split=segments_bags(contract)),
     )  # fmt: skip
-    return _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
+    plan = _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
+    if plan.requests and any(f.kind is FeatureKind.VIDEO for f in contract.features):
+        with scratch_folder("encoder") as folder:
+            check_encoder(encoder, folder)  # settings the encoder refuses: said once, not by every episode
+    return plan
 
 
 def _held_windows(

@@ -13,7 +13,7 @@ from s3fs import S3FileSystem
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
 from bagport.episode import convert_episode
-from bagport.errors import BagportError, DatasetWriteError, QualityError
+from bagport.errors import BagportError, DatasetWriteError, EncoderSettingsError, QualityError
 from bagport.reduce import finish_up_to_date, reduce_run
 from bagport.run import EpisodeFailure, PlannedEpisode, RunPlan, plan_run, stage_all
 from bagport.synth import EpisodeSpec, Faults, write_episode_bag
@@ -314,3 +314,15 @@ def test_an_unchanged_fleet_with_a_broken_bag_is_up_to_date_and_a_transient_fail
     assert not again.up_to_date and str(broken) in [r.bag_uri for r in again.requests]
     appending = plan_run(config.model_copy(update={"overwrite": False, "append": True}))
     assert [r.bag_uri for r in appending.requests] == [str(broken)]
+
+
+def test_codec_settings_the_encoder_refuses_stop_the_plan_before_any_episode(tmp_path: Path) -> None:
+    write_episode_bag(tmp_path / "bags" / "a", "mcap", EpisodeSpec(duration_s=0.3, cameras=SMALL_CAMERAS))
+    config = ConvertConfig(
+        bags_glob=str(tmp_path / "bags" / "*"), contract=str(SAMPLE_CONTRACT), output=str(tmp_path / "out"),
+        encoder={"codec": "libsvtav1", "crf": 99},
+    )  # fmt: skip
+    with pytest.raises(EncoderSettingsError, match="crf=99") as err:
+        plan_run(config)
+    assert err.value.codec == "libsvtav1"
+    assert not (tmp_path / "out").exists() and not (tmp_path / "out.staging").exists()

@@ -284,3 +284,27 @@ def test_a_qa_report_that_cannot_be_written_is_one_paragraph_after_the_scores(
     assert "bags[0]" in out  # the scores were printed first
     assert f"--report {report}: cannot be written (No such file or directory); the scores above" in err
     assert "Traceback" not in err
+
+
+def test_codec_settings_the_encoder_refuses_are_one_paragraph_before_any_bag(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """Fuzzed: crf out of range failed every episode with 'encoding frame 0 failed: [Errno 34] ...
+    avcodec_open2' naming a temporary clip, and an unknown pix_fmt as a raw ValueError."""
+    write_episode_bag(tmp_path / "bags" / "a", "mcap", EpisodeSpec(duration_s=0.3))
+    for name, text, said in (
+        ("range", "codec: libsvtav1\ncrf: 99\n", "Numerical result out of range when libsvtav1 opened"),
+        (
+            "pixfmt",
+            "codec: libx264\npix_fmt: yuv9000\n",
+            "pix_fmt 'yuv9000' is not a pixel format FFmpeg knows",
+        ),
+    ):
+        codec = tmp_path / f"{name}.yaml"
+        codec.write_text(text)
+        argv = ["convert", "--glob", str(tmp_path / "bags" / "*"), "--contract", str(SAMPLE_CONTRACT),
+                "--output", str(tmp_path / "out"), "--codec", str(codec)]  # fmt: skip
+        assert main(argv) == 2
+        err = capfd.readouterr().err
+        assert f"error: the codec settings cannot encode video: {said}" in err and "Traceback" not in err
+        assert "bagport-episode" not in err and not (tmp_path / "out.staging").exists()

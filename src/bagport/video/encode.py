@@ -16,11 +16,11 @@ import av
 import numpy as np
 import numpy.typing as npt
 
-from bagport.errors import VideoError
+from bagport.errors import EncoderSettingsError, VideoError
 from bagport.video.depth import DEPTH_PIX_FMT
 from bagport.video.settings import EncoderSettings
 
-__all__ = ["ClipInfo", "StreamingEncoder"]
+__all__ = ["ClipInfo", "StreamingEncoder", "check_encoder"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -54,17 +54,31 @@ class StreamingEncoder:
         self._settings = settings
         try:
             self._container: Any = av.open(str(self._path), mode="w")
+        except (av.error.FFmpegError, OSError) as err:
+            raise VideoError(f"{path}: cannot create the clip ({err})") from err
+        try:
             stream: Any = self._container.add_stream(
                 settings.codec, rate=fps, options=_quiet(settings.codec_options())
             )
         except (av.error.FFmpegError, ValueError) as err:
-            raise VideoError(
+            self._container.close()
+            raise EncoderSettingsError(
                 f"{path}: cannot start encoder {settings.codec!r} ({err}). Fix: pick a codec this PyAV build has "
-                "(libsvtav1, libx264) in the codec preset."
+                "(libsvtav1, libx264) in the codec preset.",
+                codec=settings.codec,
+                detail=f"no encoder {settings.codec!r} in this PyAV build (libsvtav1 and libx264 are)",
             ) from err
         stream.width = width
         stream.height = height
-        stream.pix_fmt = settings.pix_fmt
+        try:
+            stream.pix_fmt = settings.pix_fmt
+        except ValueError as err:
+            self._container.close()
+            raise EncoderSettingsError(
+                f"{path}: {err}. Fix: set pix_fmt to one {settings.codec} takes (yuv420p) in the codec preset.",
+                codec=settings.codec,
+                detail=f"pix_fmt {settings.pix_fmt!r} is not a pixel format FFmpeg knows",
+            ) from err
         stream.time_base = Fraction(1, fps)
         self._stream: Any = stream
         self._frames = 0
@@ -90,6 +104,13 @@ class StreamingEncoder:
             for packet in self._stream.encode(frame):
                 self._container.mux(packet)
         except av.error.FFmpegError as err:
+            if self._frames == 0 and "avcodec_open2" in str(err.filename):  # opened at the first frame
+                raise EncoderSettingsError(
+                    f"{self._path}: encoder {self._settings.codec} refused its settings "
+                    f"({_settings_text(self._settings)}): {err.strerror}. Fix: correct them in the codec preset.",
+                    codec=self._settings.codec,
+                    detail=f"{err.strerror} when {self._settings.codec} opened",
+                ) from err
             raise VideoError(f"{self._path}: encoding frame {self._frames} failed: {err}") from err
         self._frames += 1
 
@@ -167,3 +188,26 @@ def _stream_codec_name(path: Path, encoder: str) -> str:
     finally:
         container.close()
     return name
+
+
+def _settings_text(settings: EncoderSettings) -> str:
+    options = {"pix_fmt": settings.pix_fmt, **settings.codec_options()}
+    return ", ".join(f"{key}={value}" for key, value in options.items())
+
+
+def check_encoder(settings: EncoderSettings, folder: Path) -> None:
+    """Encode one black 64x64 frame with ``settings`` into ``folder``: settings the encoder refuses (an option
+    out of range or of the wrong kind, a pixel format it lacks) fail here once, before any episode, instead
+    of in every episode with the same error (:class:`EncoderSettingsError`, naming the settings)."""
+    depth = settings.pix_fmt == DEPTH_PIX_FMT
+    frame = np.zeros((64, 64) if depth else (64, 64, 3), dtype=np.uint16 if depth else np.uint8)
+    try:
+        with StreamingEncoder(folder / "encoder-check.mp4", fps=30, width=64, height=64, settings=settings) as clip:
+            clip.write(frame)
+    except EncoderSettingsError as err:
+        raise EncoderSettingsError(
+            f"the codec settings cannot encode video: {err.detail} ({_settings_text(settings)}). Fix: correct "
+            "them in the codec preset (--codec; configs/codecs/*.yaml are known to work).",
+            codec=err.codec,
+            detail=err.detail,
+        ) from err

@@ -38,6 +38,33 @@ def default_encoder() -> dict[str, Any]:
     return dict(DEFAULT_ENCODER)
 
 
+_KINDS: dict[str, tuple[str, tuple[type, ...], bool]] = {
+    "codec": ("an encoder name (libx264, libsvtav1)", (str,), False),
+    "pix_fmt": ("a pixel format name (yuv420p)", (str,), False),
+    "g": ("a whole number of frames", (int,), True),
+    "crf": ("a whole number", (int,), True),
+    "preset": ("a number or a name", (int, str), True),
+    "fast_decode": ("a whole number (0-2)", (int,), False),
+    "threads": ("a whole number", (int,), True),
+    "extra_options": ("a mapping of FFmpeg option names to values", (dict,), True),
+}
+"""Each setting's kind as the message says it, the types it takes, and whether it may be null."""
+
+
+def _check_types(values: Mapping[str, Any]) -> None:
+    """A setting of the wrong kind (``crf: high``) is refused here, not by the encoder of every episode."""
+    for name, value in values.items():
+        kind, types, nullable = _KINDS[name]
+        if value is None and nullable:
+            continue
+        if isinstance(value, bool) or not isinstance(value, types):
+            raise VideoError(
+                f"encoder setting {name}: {value!r} is not {kind}"
+                + (" (or null for the encoder's default)" if nullable else "")
+                + ". Fix: correct it in the codec preset (--codec, configs/codecs/*.yaml)."
+            )
+
+
 @dataclass(frozen=True, slots=True)
 class EncoderSettings:
     codec: str = _SVTAV1
@@ -59,6 +86,7 @@ class EncoderSettings:
                 "Fix: correct the codec preset (configs/codecs/*.yaml)."
             )
         values = dict(data)
+        _check_types(values)
         if "extra_options" in values:
             values["extra_options"] = {str(k): str(v) for k, v in dict(values["extra_options"] or {}).items()}
         if values.get("codec", _SVTAV1) != _SVTAV1 and "preset" not in values:

@@ -7,9 +7,12 @@ from pathlib import Path
 import numpy as np
 import numpy.typing as npt
 import pytest
+import yaml
 
-from bagport.errors import VideoError
+from bagport.errors import EncoderSettingsError, VideoError
 from bagport.video import EncoderSettings, StreamingEncoder, concat_clips, iter_frames, probe_video
+from bagport.video.encode import check_encoder
+from tests.helpers import REPO
 
 FAST = EncoderSettings.from_dict({"codec": "libx264", "crf": 10, "preset": "ultrafast", "g": 2})
 
@@ -115,14 +118,47 @@ def test_bgr_views_encode_like_their_rgb_copy(tmp_path: Path) -> None:
 
 
 def test_bagport_default_encoder_is_the_h264_fast_preset() -> None:
-    import yaml  # noqa: PLC0415
-
     from bagport.config import ConvertConfig  # noqa: PLC0415
     from bagport.video.settings import DEFAULT_ENCODER  # noqa: PLC0415
-    from tests.helpers import REPO  # noqa: PLC0415
 
     preset = yaml.safe_load((REPO / "configs/codecs/h264-fast.yaml").read_text())
     assert preset == dict(DEFAULT_ENCODER)
     config = ConvertConfig(manifest="m.yaml", contract="c.yaml", output="out")
     assert config.encoder == preset
     assert EncoderSettings.from_dict(config.encoder).codec == "libx264"
+
+
+@pytest.mark.parametrize(
+    ("setting", "value", "kind"),
+    [("crf", "high", "a whole number"), ("g", 2.5, "a whole number of frames"), ("preset", True, "a number or a name"),
+     ("codec", 264, "an encoder name"), ("extra_options", ["tune"], "a mapping")],
+)  # fmt: skip
+def test_a_setting_of_the_wrong_kind_is_refused_by_name(setting: str, value: object, kind: str) -> None:
+    with pytest.raises(VideoError, match=rf"encoder setting {setting}: .* is not {kind}.*Fix: correct it"):
+        EncoderSettings.from_dict({setting: value})
+    assert EncoderSettings.from_dict({"crf": None, "preset": "veryfast", "codec": "libx264"}).crf is None
+
+
+@pytest.mark.parametrize("preset", sorted((REPO / "configs" / "codecs").glob("*.yaml")), ids=lambda p: p.stem)
+def test_every_shipped_codec_preset_passes_the_encoder_check(preset: Path, tmp_path: Path) -> None:
+    check_encoder(EncoderSettings.from_dict(yaml.safe_load(preset.read_text())), tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("settings", "detail"),
+    [
+        ({"codec": "libsvtav1", "crf": 99}, "Numerical result out of range when libsvtav1 opened"),
+        ({"codec": "libx264", "extra_options": {"profile": "bogus"}}, "Invalid argument when libx264 opened"),
+        ({"codec": "libx264", "pix_fmt": "yuv9000"}, "pix_fmt 'yuv9000' is not a pixel format FFmpeg knows"),
+        ({"codec": "nope"}, "no encoder 'nope' in this PyAV build"),
+    ],
+    ids=["option-out-of-range", "option-refused", "unknown-pix-fmt", "unknown-codec"],
+)
+def test_settings_the_encoder_refuses_are_found_before_any_episode(
+    settings: dict[str, object], detail: str, tmp_path: Path
+) -> None:
+    with pytest.raises(EncoderSettingsError) as err:
+        check_encoder(EncoderSettings.from_dict(settings), tmp_path)
+    assert err.value.detail.startswith(detail)
+    assert err.value.codec == settings["codec"]
+    assert "Fix: correct them in the codec preset" in str(err.value) and str(tmp_path) not in str(err.value)

@@ -12,7 +12,15 @@ from fsspec.core import url_to_fs
 
 from bagport.errors import ContractError, DatasetWriteError, ManifestError
 
-__all__ = ["is_local", "output_fs", "protocol_of", "read_text", "read_text_file", "require_bucket"]
+__all__ = [
+    "UTF8_FIX",
+    "is_local",
+    "output_fs",
+    "protocol_of",
+    "read_text",
+    "read_text_file",
+    "require_bucket",
+]
 
 BUCKET_STORES = frozenset({"s3", "s3a", "gs", "gcs", "abfs", "abfss", "az", "adl"})
 """Object stores whose first path component is a bucket (container) that writing would create."""
@@ -30,7 +38,7 @@ def is_local(fs: AbstractFileSystem) -> bool:
     return "file" in names or "local" in names
 
 
-_UTF8_FIX = "save it as UTF-8 (from Latin-1: `iconv -f latin1 -t utf-8 OLD > NEW`)."
+UTF8_FIX = "save it as UTF-8 (from Latin-1: `iconv -f latin1 -t utf-8 OLD > NEW`)."
 
 
 def read_text_file(
@@ -52,7 +60,7 @@ def read_text_file(
         raise error(f"{subject} does not exist", file=uri, fix=missing_fix or fix) from err
     except UnicodeDecodeError as err:
         raise error(
-            f"{subject} is not UTF-8 text (the byte at offset {err.start} is not)", file=uri, fix=_UTF8_FIX
+            f"{subject} is not UTF-8 text (the byte at offset {err.start} is not)", file=uri, fix=UTF8_FIX
         ) from err
     except OSError as err:
         raise error(f"{subject} cannot be read ({err.strerror or err})", file=uri, fix=fix) from err

@@ -29,6 +29,7 @@ from rosbags.typesys.store import Typestore
 from bagport.bags.bundled import BUNDLED_DEFINITIONS
 from bagport.bags.typeload import one_line
 from bagport.errors import BagReadError, DecodeError
+from bagport.uris import UTF8_FIX
 
 __all__ = [
     "CheckedDeserializer",
@@ -60,7 +61,8 @@ def read_msg_path(uri: str) -> dict[str, str]:
     """Every ``.msg`` file under ``uri`` (local folder or fsspec URI): ``{type name: text}``.
 
     The layout is a ROS workspace's: ``DIR/<package>/msg/<Type>.msg`` (``DIR/<package>/<Type>.msg``
-    is accepted too); the folders give the package, as in ROS.
+    is accepted too); the folders give the package, as in ROS. Every definition is parsed here (a file
+    that is not ROS 2 .msg syntax is one error at the plan, not one per bag, whether a bag uses it or not).
     """
     try:
         fs, root = url_to_fs(uri)
@@ -84,7 +86,16 @@ def read_msg_path(uri: str) -> dict[str, str]:
                 fix="move it to <package>/msg/<Type>.msg under the --msg-path folder.",
             )
         with fs.open(path, "rb") as handle:
-            found[name] = handle.read().decode("utf-8")
+            data = handle.read()
+        try:
+            found[name] = data.decode("utf-8")
+        except UnicodeDecodeError as err:
+            raise BagReadError(
+                f"is not UTF-8 text (the byte at offset {err.start} is not)",
+                uri=f"{uri.rstrip('/')}/{relative}",
+                fix=UTF8_FIX,
+            ) from err
+    parse_msg_definitions(found)
     return found
 
 

@@ -202,7 +202,9 @@ def check_encoder(settings: EncoderSettings, folder: Path) -> None:
     depth = settings.pix_fmt == DEPTH_PIX_FMT
     frame = np.zeros((64, 64) if depth else (64, 64, 3), dtype=np.uint16 if depth else np.uint8)
     try:
-        with StreamingEncoder(folder / "encoder-check.mp4", fps=30, width=64, height=64, settings=settings) as clip:
+        with StreamingEncoder(
+            folder / "encoder-check.mp4", fps=30, width=64, height=64, settings=settings
+        ) as clip:
             clip.write(frame)
     except EncoderSettingsError as err:
         raise EncoderSettingsError(

@@ -252,9 +252,15 @@ def test_msg_path_errors(tmp_path: Path) -> None:
     bad = tmp_path / "acme_msgs" / "msg"
     bad.mkdir(parents=True)
     (bad / "Broken.msg").write_text("int32[ x\n")
-    definitions = read_msg_path(str(tmp_path))
     with pytest.raises(BagReadError, match=r"definition of acme_msgs/msg/Broken cannot be parsed"):
-        parse_msg_definitions(definitions)
+        read_msg_path(str(tmp_path))  # parsed when read: once at the plan, not once per bag
+    with pytest.raises(BagReadError, match=r"definition of acme_msgs/msg/Broken cannot be parsed"):
+        parse_msg_definitions({"acme_msgs/msg/Broken": "int32[ x\n"})
+    (bad / "Broken.msg").write_bytes(b"int32 x # caf\xe9\n")
+    with pytest.raises(
+        BagReadError, match=r"Broken\.msg: is not UTF-8 text \(the byte at offset 13 is not\).*iconv"
+    ):
+        read_msg_path(str(tmp_path))
 
 
 _PREPARED_PROBE = """

@@ -96,7 +96,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     encoder = EncoderSettings.from_dict(config.encoder)
     qa = _qa_config(config)
     manifest = _manifest(config)
-    fs, out_path = output_fs(config.output, "--output")
+    fs, out_path = output_fs(config.output, "--output", beside=True)
     require_bucket(fs, out_path, config.output)
     staging = config.resolved_staging()
     staging_fs, staging_path = output_fs(staging, "--staging")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import tempfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -79,9 +80,11 @@ def read_text(uri: str, what: str) -> str:
     )
 
 
-def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:
+def output_fs(uri: str, what: str, *, beside: bool = False) -> tuple[AbstractFileSystem, str]:
     """fsspec's file system and path for an output or staging ``uri`` (``what``: its option); a protocol
-    fsspec does not know (a typo, or its package not installed) is one paragraph."""
+    fsspec does not know (a typo, or its package not installed) is one paragraph, and so is a local path
+    this user cannot write (checked where it would be made; with ``beside``, also in its parent, where a
+    dataset's build folder goes)."""
     if not uri.strip():
         raise DatasetWriteError(
             f"{what} is empty; nothing was converted or written. Fix: give the dataset's folder or URI."
@@ -94,22 +97,33 @@ def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:
             "path, or a URI fsspec knows (s3://, gs://, ...) with its package installed (s3fs, gcsfs, ...)."
         ) from err
     if is_local(fs):
-        _refuse_under_a_file(Path(str(path)), uri, what)
+        local = Path(str(path))
+        for folder in (local, local.parent) if beside else (local,):
+            _check_local_folder(folder, uri, what)
     return fs, str(path)
 
 
-def _refuse_under_a_file(path: Path, uri: str, what: str) -> None:
-    """A local output or staging store that is a file, or lies under one: every episode would fail to stage
-    with a bare ``NotADirectoryError``; said once, before anything converts."""
-    for folder in (path, *path.parents):
-        if folder.exists():
-            if folder.is_dir():
-                return
-            where = "is a file" if folder == path else f"lies under {folder}, which is a file"
-            raise DatasetWriteError(
-                f"{what} {uri} {where}; nothing was converted or written. Fix: give a folder path (one that "
-                "does not exist yet is made)."
-            )
+def _check_local_folder(path: Path, uri: str, what: str) -> None:
+    """The nearest of ``path`` and its parents that exists must be a folder that takes a new folder: a file
+    there, or a folder this user cannot write (permissions, a read-only mount, /proc), failed every episode
+    with a bare ``NotADirectoryError`` or ``PermissionError``; said once, before anything converts."""
+    folder = next((f for f in (path, *path.parents) if f.exists()), None)
+    if folder is None:
+        return
+    if not folder.is_dir():
+        where = "is a file" if folder == path else f"lies under {folder}, which is a file"
+        raise DatasetWriteError(
+            f"{what} {uri} {where}; nothing was converted or written. Fix: give a folder path (one that "
+            "does not exist yet is made)."
+        )
+    try:
+        Path(tempfile.mkdtemp(prefix=".bagport-write-check-", dir=folder)).rmdir()
+    except OSError as err:
+        raise DatasetWriteError(
+            f"{what} {uri}: nothing can be written in {folder} ({err.strerror or err}); nothing was converted "
+            "or written. Fix: give a folder this user can write (check its owner and permissions, the free "
+            "space, and whether it is mounted read-only)."
+        ) from err
 
 
 def require_bucket(fs: AbstractFileSystem, path: str, uri: str) -> None:

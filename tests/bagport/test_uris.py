@@ -3,6 +3,7 @@ new bucket (on moto's real S3 HTTP endpoint, through s3fs)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -102,3 +103,30 @@ def test_a_local_output_or_staging_that_is_or_lies_under_a_file_is_refused_befor
     assert output_fs(str(tmp_path / "new" / "ds"), "--output")[1] == str(tmp_path / "new" / "ds")
     with pytest.raises(DatasetWriteError, match="--output is empty; nothing was converted"):
         output_fs("", "--output")  # it said "error:  already exists"
+    assert not [
+        p for p in tmp_path.rglob("*") if p.name.startswith(".bagport")
+    ]  # the write checks leave nothing
+
+
+def test_a_local_output_or_staging_nobody_can_write_is_refused_before_converting(tmp_path: Path) -> None:
+    """Each episode failed with 'Task run encountered an exception PermissionError' (or FileNotFoundError
+    under /proc); now one paragraph at the plan, naming the folder that refused."""
+    with pytest.raises(
+        DatasetWriteError, match=r"--output /proc/bagport/ds: nothing can be written in /proc \(No such file"
+    ):
+        output_fs("/proc/bagport/ds", "--output", beside=True)
+    with pytest.raises(
+        DatasetWriteError, match=r"--staging /proc/st: nothing can be written in /proc.*read-only"
+    ):
+        output_fs("/proc/st", "--staging")
+    locked = tmp_path / "locked"
+    locked.mkdir()
+    (locked / "ds").mkdir()
+    locked.chmod(0o500)  # the dataset's build folder goes beside it, in its parent
+    try:
+        if os.geteuid() != 0:  # root writes whatever the mode says
+            with pytest.raises(DatasetWriteError, match=rf"nothing can be written in {locked} \(Permission"):
+                output_fs(str(locked / "ds"), "--output", beside=True)
+        assert output_fs(str(locked / "ds"), "--staging")[1] == str(locked / "ds")  # staging: itself only
+    finally:
+        locked.chmod(0o700)

@@ -5,10 +5,12 @@ then the other formats and the staging clean-up. The plan side is :mod:`bagport.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass, fields, replace
+from pathlib import Path
 from typing import Any
 
 from fsspec.core import url_to_fs
@@ -25,6 +27,7 @@ from bagport.run import RunPlan, failure_key, up_to_date, write_key
 from bagport.segment import kept_segmentation
 from bagport.selection import EpisodeFailure, select_episodes
 from bagport.staging import EpisodeSummary, StagedFeature, read_summary
+from bagport.uris import is_local
 from bagport.video import EncoderSettings
 
 __all__ = [
@@ -261,11 +264,24 @@ def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:
         _, staged_path = url_to_fs(uri)
         if fs.exists(staged_path):
             fs.rm(staged_path, recursive=True)
-    try:
-        if fs.exists(path) and not fs.find(path):
-            fs.rm(path, recursive=True)
-    except OSError:
-        pass
+    if is_local(fs):
+        _remove_empty_folders(Path(path))
+
+
+def _remove_empty_folders(root: Path) -> None:
+    """Remove ``root``'s empty folders, deepest first, and ``root`` when it ends up empty: each ``rmdir``
+    fails on a folder another run has just put an episode in (a shared staging store), where checking that
+    the store is empty and then removing it whole could delete that episode. (An object store has no
+    folders: nothing is left once the files are gone.)"""
+    if not root.is_dir():
+        return
+    for folder in sorted(
+        (p for p in root.rglob("*") if p.is_dir()), key=lambda p: len(p.parts), reverse=True
+    ):
+        with contextlib.suppress(OSError):  # not empty (another run's), or gone
+            folder.rmdir()
+    with contextlib.suppress(OSError):
+        root.rmdir()
 
 
 def summary_json(report: DatasetReport) -> str:

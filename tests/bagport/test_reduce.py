@@ -9,15 +9,17 @@ from typing import Any
 import pytest
 
 import bagport.reduce
+from bagport.config import ConvertConfig
 from bagport.dataset import DatasetReport
 from bagport.dataset.provenance import episode_provenance
 from bagport.dataset.repair import repair_dataset
 from bagport.episode.staged import PlannedEpisode
 from bagport.errors import DatasetWriteError
 from bagport.formats import write_formats
-from bagport.reduce import read_staged
+from bagport.reduce import read_staged, reduce_run
+from bagport.run import RunPlan, plan_run, stage_all
 from bagport.synth import EpisodeSpec, write_episode_bag
-from tests.helpers import SAMPLE_CONTRACT, SMALL_CAMERAS, convert_in_process, staged_episodes
+from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT, SMALL_CAMERAS, convert_in_process, staged_episodes
 
 
 def test_held_summaries_are_lean_and_the_run_record_gets_them_whole(tmp_path: Path) -> None:
@@ -58,3 +60,45 @@ def test_the_output_stays_held_while_the_other_formats_are_written(
     assert len(refusals) == 1
     assert repair_dataset(str(out)).actions == ()
     assert (tmp_path / "dataset.hdf5").exists() and not (tmp_path / "staging").exists()
+
+
+def test_a_run_sharing_its_staging_store_never_removes_an_episode_another_run_stages_meanwhile(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The staging store goes when a run leaves it empty; another run's episode published into it at that
+    moment (the store shared, --staging) stays whole: only empty folders are removed, one rmdir each, where
+    checking the store was empty and then removing it whole deleted what arrived in between."""
+    for name in ("a", "b"):
+        write_episode_bag(
+            tmp_path / "bags" / name, "mcap", EpisodeSpec(duration_s=0.5, cameras=SMALL_CAMERAS)
+        )
+    contract = tmp_path / "contract.yaml"
+    contract.write_text(SAMPLE_CONTRACT.read_text())
+
+    def plan(name: str) -> RunPlan:
+        config = ConvertConfig(
+            bags_glob=str(tmp_path / "bags" / name), contract=str(contract), output=str(tmp_path / f"out-{name}"),
+            staging=str(tmp_path / "staging"), encoder=FAST_CODEC,
+        )  # fmt: skip
+        return plan_run(config)
+
+    other = plan("b")
+    (request,) = other.requests
+    early = stage_all(other)  # run b's episode, staged, then moved aside to arrive at the worst moment
+    staged_b = Path(early[0].dir_uri)
+    aside = tmp_path / "aside"
+    staged_b.rename(aside)
+    real_rmdir = Path.rmdir
+
+    def arrives_before_the_first_rmdir(folder: Path) -> None:
+        if aside.exists():
+            aside.rename(staged_b)
+        real_rmdir(folder)
+
+    monkeypatch.setattr(Path, "rmdir", arrives_before_the_first_rmdir)
+    run_a = plan("a")
+    reduce_run(run_a, stage_all(run_a))
+    monkeypatch.setattr(Path, "rmdir", real_rmdir)
+    assert not aside.exists() and (staged_b / "episode.json").is_file()
+    assert reduce_run(other, early).episodes == 1  # run b writes its episode from the staging store
+    assert request.bag_uri.endswith("/b") and not (tmp_path / "staging").exists()

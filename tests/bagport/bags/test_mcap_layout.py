@@ -1,6 +1,7 @@
 """Damage to an MCAP file's framing (record lengths, the summary's records and CRC, the footer) is named by
 file and byte offset with the fix for changed bytes: never the reader's ``OverflowError`` or a
-``__schemaless__`` type, never a reindex."""
+``__schemaless__`` type, never a reindex. A zeroed CRC field among chunks with CRCs is damage, not a bag
+written without CRCs."""
 
 from __future__ import annotations
 
@@ -10,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from bagport.bags import open_bag
+from bagport.bags import format_bag_info, open_bag
 from bagport.errors import BagReadError
 from bagport.synth import EpisodeSpec, write_episode_bag
 
@@ -118,3 +119,18 @@ def test_damage_bagport_cannot_locate_quotes_the_reader(tmp_path: Path) -> None:
         BagReadError, match=r"cannot be opened; the reader said: AnyReaderError: Profile is not"
     ):
         open_bag(str(bag))
+
+
+def test_a_zeroed_first_chunk_crc_among_crcs_is_damage_not_a_bag_without_crcs(tmp_path: Path) -> None:
+    bag, mcap = _bag(tmp_path, CRCS)
+    data = bytearray(mcap.read_bytes())
+    chunks = [pos for pos, opcode in _records(bytes(data), 8) if opcode == 0x06]
+    assert len(chunks) >= 2
+    data[chunks[0] + 33 : chunks[0] + 37] = bytes(4)  # its uncompressed_crc
+    mcap.write_bytes(bytes(data))
+    with open_bag(str(bag)) as reader:
+        text = format_bag_info(reader.info)
+    assert (
+        f"MCAP chunk CRC-32s, except the chunk at byte offset {chunks[0]} of ep.mcap: its CRC field" in text
+    )
+    assert "written with CRCs off" not in text and "Fix: " not in text

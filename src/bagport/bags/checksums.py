@@ -12,6 +12,7 @@ from __future__ import annotations
 import struct
 from collections.abc import Sequence
 from pathlib import Path
+from typing import IO
 
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
@@ -21,6 +22,8 @@ from bagport.bags.remote import RemotePath
 
 __all__ = ["bag_checksums"]
 
+_COMPARED_CHUNKS = 4
+"""Chunks whose CRC field is read when the first one's is 0."""
 _CRC_AT = 1 + 8 + 8 + 8 + 8
 """Offset of ``uncompressed_crc`` in a Chunk record: opcode, length, start/end time, uncompressed size."""
 
@@ -46,29 +49,59 @@ _NONE = {
 }
 
 
-def _mcap_file(path: Path | RemotePath) -> str | None:
-    """Why one MCAP file's messages are not covered by chunk CRCs, or ``None`` when they are."""
+_COMPARED_CHUNKS = 4
+"""Chunks whose CRC field is read when the first one's is 0: writers set CRCs for all chunks or none, so a
+0 among CRCs is a damaged chunk header, not a recorder setting."""
+
+
+def _first_chunk_crc_zeroed(
+    path: Path | RemotePath, handle: IO[bytes], starts: list[int]
+) -> Checksums | None:
+    """The finding for a file whose first chunk's CRC field reads 0 while a later chunk has a CRC (writers
+    set CRCs for all chunks or none: the first chunk's header is damaged); ``None`` when no chunk has one."""
+    for start in starts[1:_COMPARED_CHUNKS]:
+        handle.seek(start + _CRC_AT)
+        if struct.unpack("<I", handle.read(4))[0]:
+            return Checksums(
+                True,
+                f"MCAP chunk CRC-32s, except the chunk at byte offset {starts[0]} of {path.name}: its CRC field "
+                "reads 0 while the next chunks have CRCs, so its header is damaged and its messages go unchecked",
+            )
+    return None
+
+
+def _mcap_file(path: Path | RemotePath) -> Checksums | None:
+    """What does not protect one MCAP file's messages as chunk CRCs would, or ``None`` when they do."""
     with path.open("rb") as handle:
         summary = make_reader(handle).get_summary()
         if summary is None:
-            return f"{path.name} has no summary"
+            return _unchecked(f"{path.name} has no summary")
         if not summary.chunk_indexes:
-            return f"{path.name} is not chunked (`noChunking: true`)"
-        handle.seek(summary.chunk_indexes[0].chunk_start_offset + _CRC_AT)
+            return _unchecked(f"{path.name} is not chunked (`noChunking: true`)")
+        starts = sorted(index.chunk_start_offset for index in summary.chunk_indexes)
+        handle.seek(starts[0] + _CRC_AT)
         (crc,) = struct.unpack("<I", handle.read(4))
-    return None if crc else f"{path.name} was written with CRCs off"
+        if crc:
+            return None
+        return _first_chunk_crc_zeroed(path, handle, starts) or _unchecked(
+            f"{path.name} was written with CRCs off"
+        )
+
+
+def _unchecked(why: str) -> Checksums:
+    return Checksums(False, f"MCAP without chunk CRCs ({why})", MCAP_FIX)
 
 
 def bag_checksums(storage: Storage, data_files: Sequence[Path | RemotePath]) -> Checksums:
     """What protects the bag's bytes; MCAP files are judged by their first chunk (writers set CRCs for
-    all chunks or none)."""
+    all chunks or none; a first chunk without one is compared with the next few)."""
     if storage is not Storage.MCAP:
         return _NONE[storage]
     for path in data_files:
         try:
-            why = _mcap_file(path)
+            found = _mcap_file(path)
         except (McapError, OSError, ValueError, struct.error, EOFError) as err:
-            why = f"{path.name}'s summary cannot be read ({type(err).__name__})"
-        if why is not None:
-            return Checksums(False, f"MCAP without chunk CRCs ({why})", MCAP_FIX)
+            found = _unchecked(f"{path.name}'s summary cannot be read ({type(err).__name__})")
+        if found is not None:
+            return found
     return Checksums(True, "MCAP chunk CRC-32s")

@@ -3,6 +3,7 @@ the topics concerned, and the fix. Never the storage library's exception on its 
 
 from __future__ import annotations
 
+import re
 import sqlite3
 import struct
 from collections.abc import Iterable, Iterator
@@ -16,6 +17,7 @@ from rosbags.rosbag1 import ReaderError as Ros1ReaderError
 from rosbags.rosbag2 import ReaderError as Ros2ReaderError
 
 from bagport.bags.locate import locate_damage
+from bagport.bags.mcap_layout import FIX as MCAP_FIX
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.bags.sqlite_tail import SALVAGE
@@ -48,12 +50,14 @@ STORAGE_ERRORS = (
 _REINDEX_SHORT = "reindex it (`ros2 bag reindex` / `rosbag reindex`)."
 _REINDEX = "reindex the bag (`rosbag reindex` for ROS 1, `ros2 bag reindex` for rosbag2)."
 _FIXES = {
-    Storage.MCAP: "copy the file again from the robot or a backup (its bytes changed after recording); "
-    "`mcap doctor FILE` lists the damaged records, `mcap recover FILE -o FIXED.mcap` keeps the intact ones.",
+    Storage.MCAP: MCAP_FIX,
     Storage.SQLITE3: f"copy the bag again from the robot or a backup; without one, {SALVAGE}.",
     Storage.ROS1: "copy the bag again from the robot or a backup; if only its index is damaged "
     "(the messages are intact), `rosbag reindex` rebuilds it.",
 }
+_NOT_INDEXED = re.compile(r"\b(not indexed|index(es)? (is|are) (missing|damaged|corrupt))\b", re.IGNORECASE)
+"""The reader's words for a missing or broken index, which a reindex rebuilds (never for MCAP: its
+summary holds the index, and `ros2 bag reindex` rewrites only metadata.yaml)."""
 
 BagFile = Path | RemotePath
 
@@ -77,19 +81,23 @@ def damaged_bag(
     last: tuple[str, int] | None = None,
 ) -> BagReadError:
     """The error for a bag whose ``action`` ("cannot be opened", "reading failed") raised ``err``;
-    walks ``files`` to name the damaged record. ``last``: (topic, log_ns) of the last intact message."""
+    walks ``files`` to name the damaged record. ``last``: (topic, log_ns) of the last intact message.
+
+    The library's words appear only when bagport finds nothing itself ("the reader said: ..."): where
+    the damage is located, they repeat it less precisely (or mislead, as a damaged length's
+    ``OverflowError`` does)."""
     damage = locate_damage(storage, list(files))
-    # damage with a fix of its own (a file cut short) says what happened, not the library's words
-    if damage is not None and damage.fix is not None:
-        return BagReadError(f"{action}: {damage.describe()}", uri=uri, fix=damage.fix)
-    what = f"{action} ({_one_line(err)})"
     if damage is not None:
-        what += f"; damage found in {damage.describe()}"
-    if last is not None:
+        what = f"{action}: {damage.describe()}"
+    else:
+        what = f"{action}; the reader said: {_one_line(err)}"
+    if last is not None and (damage is None or damage.fix is None):
         what += f"; the last intact message read was on {last[0]} at log time {last[1]} ns"
     topics = damage.topics if damage is not None else ()
     topic = topics[0] if len(topics) == 1 else last[0] if last is not None and not topics else None
-    index_only = damage is None and "index" in str(err).lower()
+    if damage is not None and damage.fix is not None:  # a file cut short is not a changed one
+        return BagReadError(what, uri=uri, fix=damage.fix)
+    index_only = damage is None and storage is not Storage.MCAP and _NOT_INDEXED.search(str(err)) is not None
     return BagReadError(what, uri=uri, topic=topic, fix=_REINDEX if index_only else _FIXES[storage])
 
 

@@ -2,10 +2,10 @@
 
 rosbags says *that* a read failed ("Chunk checksum mismatch.", "database disk image is malformed"),
 not where. After a failure, these walk the damaged file once more with checks of their own: MCAP
-chunks against their CRC-32 and record layout, SQLite through its integrity check (page -> byte
-offset), ROS 1 records and chunks (layout, decompression, sizes). Each returns ``None`` when it finds
-nothing wrong; the error is then reported without a place. Only run after a failure: each reads the
-whole file (a record or chunk at a time; memory stays bounded).
+framing (:mod:`bagport.bags.mcap_layout`), then chunks against their CRC-32 and record layout, SQLite
+through its integrity check (page -> byte offset), ROS 1 records and chunks (layout, decompression,
+sizes). Each returns ``None`` when it finds nothing wrong; the error is then reported without a place.
+Only run after a failure: each reads the whole file (a record or chunk at a time; memory stays bounded).
 """
 
 from __future__ import annotations
@@ -26,6 +26,7 @@ from backports import zstd
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
+from bagport.bags.mcap_layout import mcap_layout_damage
 from bagport.bags.mcap_tail import FIX as CUT_FIX
 from bagport.bags.mcap_tail import mcap_cut
 from bagport.bags.records import Storage
@@ -131,6 +132,9 @@ def _locate_mcap(path: Path | RemotePath) -> Damage | None:
     cut = mcap_cut(path)
     if cut is not None:
         return Damage(path.name, None, cut.describe(), fix=CUT_FIX)
+    framing = mcap_layout_damage(path)
+    if framing is not None:
+        return Damage(path.name, framing.offset, framing.what)
     with path.open("rb") as handle:
         try:
             summary = make_reader(handle).get_summary()

@@ -23,6 +23,7 @@ from bagport.bags.detect import detect_storage
 from bagport.bags.download import download_bag
 from bagport.bags.indexcount import index_time_range, window_counts
 from bagport.bags.layout import BagPath, ReadPlan, plan_reads
+from bagport.bags.mcap_layout import check_summaries
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.metadata_yaml import read_metadata
 from bagport.bags.publish import Int64Array, mcap_publish_times_ns
@@ -138,6 +139,7 @@ class RosbagsReader:
             store_key = f"{store}:{json.dumps(sorted((msg_definitions or {}).items()))}"
             self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled, store_key=store_key)
             self._reader.open()
+            check_summaries(uri, plan.data_files if storage is Storage.MCAP else [])
             msgtypes = {normalize_msgtype(c.msgtype) for c in self._reader.connections}
             lacking, sources = complete_bag_types(
                 self._reader, msgtypes, extra, bundled, store.name.replace("_", " ")
@@ -305,12 +307,8 @@ class RosbagsReader:
                 counts[global_topic(topic)] = counts.get(global_topic(topic), 0) + count
             return counts
         except (OSError, ValueError, KeyError, IndexError, struct.error) as err:
-            raise BagReadError(
-                f"its message index cannot be read ({type(err).__name__}: {err})",
-                uri=self._uri,
-                fix="the bag is corrupt or its index is stale: reindex it "
-                "(`ros2 bag reindex` / `rosbag reindex`).",
-            ) from err
+            storage, files, action = self._info.storage, self._data_files, "its message index cannot be read"
+            raise damaged_bag(err, uri=self._uri, storage=storage, files=files, action=action) from err
 
     def _check_counts(self, yielded: dict[str, int], promises: Mapping[str, int], window: str) -> None:
         """Fewer messages than the index promises is an error naming the topic, never a short dataset."""

@@ -68,13 +68,13 @@ def _sqlite_free_space(_: Path, data: bytes) -> int:
 # (case, storage, where to flip, expected: a regex of the refusal, or None for an identical conversion)
 CASES: list[tuple[str, str, Offset, str | None]] = [
     ("mcap-first-chunk", "mcap", lambda d, f: _mcap_chunks(f)[0][0] + 300, r"ep\.mcap at byte offset {chunk0}: chunk fails its CRC-32"),
-    ("mcap-middle-chunk", "mcap", lambda d, f: sum(_mcap_chunks(f)[len(_mcap_chunks(f)) // 2]) - 50, r"Chunk checksum mismatch.*chunk fails its CRC-32 check"),
+    ("mcap-middle-chunk", "mcap", lambda d, f: sum(_mcap_chunks(f)[len(_mcap_chunks(f)) // 2]) - 50, r"reading failed: ep\.mcap at byte offset \d+: chunk fails its CRC-32 check"),
     ("mcap-crc-field", "mcap", lambda d, f: _mcap_chunks(f)[-1][0] + 33, r"ep\.mcap at byte offset \d+: chunk fails its CRC-32 check"),
     ("mcap-header-library", "mcap", lambda d, f: d.index(b"rosbags-") + 3, None),
     ("mcap-message-index", "mcap", lambda d, f: sum(_mcap_chunks(f)[0]) + 9 + 2 + 4 + 3, None),
     ("sqlite-file-header", "sqlite3", lambda d, f: 16, r"ep\.db3"),
     ("sqlite-page-type", "sqlite3", lambda d, f: _sqlite_messages_page(f, d), r"ep\.db3 at byte offset \d+: page \d+ of messages has a damaged b-tree header"),
-    ("sqlite-record-header", "sqlite3", lambda d, f: _sqlite_payload_at(f, 40, d) - 12, r"damage found in ep\.db3: (message row 40 holds a \w+ timestamp|the message row after row 3\d \(on /\S+\) cannot be read)"),
+    ("sqlite-record-header", "sqlite3", lambda d, f: _sqlite_payload_at(f, 40, d) - 12, r"ep\.db3: (message row 40 holds a \w+ timestamp|the message row after row 3\d \(on /\S+\) cannot be read)"),
     ("sqlite-free-space", "sqlite3", lambda d, f: _sqlite_free_space(f, d), None),
 ]  # fmt: skip
 

@@ -22,8 +22,6 @@ from bagport.bags.remote import RemotePath
 
 __all__ = ["bag_checksums"]
 
-_COMPARED_CHUNKS = 4
-"""Chunks whose CRC field is read when the first one's is 0."""
 _CRC_AT = 1 + 8 + 8 + 8 + 8
 """Offset of ``uncompressed_crc`` in a Chunk record: opcode, length, start/end time, uncompressed size."""
 

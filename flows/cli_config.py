@@ -15,6 +15,7 @@ from pydantic.fields import FieldInfo
 
 from bagport.config import CliOption, ConvertConfig, cli_option
 from bagport.errors import BagportError
+from bagport.yamlsource import load_yaml
 
 __all__ = [
     "PRESETS",
@@ -51,7 +52,7 @@ def load_encoder(value: str | None) -> dict[str, Any]:
 def _yaml_file(path: Path, what: str) -> Any:
     """A small YAML file's content; a file that cannot be read or parsed is one paragraph naming it."""
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
+        return load_yaml(path.read_text(encoding="utf-8"), str(path)).data  # a key given twice is refused
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""

@@ -203,3 +203,15 @@ def test_errors_point_into_the_file_on_disk(tmp_path: Path) -> None:
     path.write_text(f"robot_type: r\n\n\nobservations:\n  - {{key: a/b, topic: /a, type: {FLOAT}}}\n")
     with pytest.raises(ContractError, match=rf"^{path}:5 \(observations\[0\]\.key\)"):
         load_contract(str(path))
+
+
+def test_a_key_given_twice_is_refused_at_its_line() -> None:
+    """YAML keeps the last of two equal keys without a word; a contract refuses them."""
+    text = (
+        f"robot_type: r\nfps: 30\nobservations:\n  - key: s\n    topic: /a\n    key: t\n    type: {FLOAT}\n"
+    )
+    with pytest.raises(
+        ContractError, match=r"key 'key' is given twice \(also line 4\).*Fix: keep one 'key:'"
+    ) as caught:
+        parse_contract(text, "robot.yaml")
+    assert (caught.value.file, caught.value.line, caught.value.field) == ("robot.yaml", 6, "observations[0]")

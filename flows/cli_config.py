@@ -10,18 +10,22 @@ from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union, get_args, get_origin
 
+import annotated_types
 import yaml
 from pydantic.fields import FieldInfo
 
 from bagport.config import CliOption, ConvertConfig, cli_option
 from bagport.errors import BagportError
+from bagport.yamlsource import load_yaml
 
 __all__ = [
+    "POSITIVE_INT",
     "PRESETS",
     "add_config_options",
     "config_options",
     "convert_config",
     "load_encoder",
+    "number_type",
     "resolve_options",
 ]
 
@@ -51,7 +55,7 @@ def load_encoder(value: str | None) -> dict[str, Any]:
 def _yaml_file(path: Path, what: str) -> Any:
     """A small YAML file's content; a file that cannot be read or parsed is one paragraph naming it."""
     try:
-        return yaml.safe_load(path.read_text(encoding="utf-8"))
+        return load_yaml(path.read_text(encoding="utf-8"), str(path)).data  # a key given twice is refused
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
@@ -88,11 +92,61 @@ def _key(name: str, option: CliOption) -> str:
 
 def _value_type(annotation: Any) -> Any:
     """``annotation`` without ``| None`` and constraints (``PositiveInt | None`` -> ``int``)."""
+    return _unwrap(annotation)[0]
+
+
+def _unwrap(annotation: Any) -> tuple[Any, tuple[Any, ...]]:
+    """``annotation`` without ``| None``, and its ``Annotated`` metadata (``PositiveInt`` -> ``Gt(0)``)."""
     if get_origin(annotation) in (Union, types.UnionType):
         (annotation,) = [a for a in get_args(annotation) if a is not type(None)]
     if get_origin(annotation) is Annotated:
-        annotation = get_args(annotation)[0]
-    return annotation
+        annotation, *metadata = get_args(annotation)
+        return annotation, tuple(metadata)
+    return annotation, ()
+
+
+def number_type(kind: type[int] | type[float], *bounds: Any) -> Callable[[str], Any]:
+    """An argparse ``type`` reading an ``int`` or ``float`` within ``bounds`` (annotated_types ``Gt``,
+    ``Ge``, ``Le``), so a value out of range is refused by the parser, naming the option (``argument
+    --workers: 0 is not allowed: give 1 or more``)."""
+    above = _bound(bounds, annotated_types.Gt, "gt")
+    strict = kind is float and above is not None  # more than 0.0; an int more than 0 is 1 or more
+    low = _bound(bounds, annotated_types.Ge, "ge")
+    if low is None and above is not None:
+        low = above if strict else above + 1
+    high = _bound(bounds, annotated_types.Le, "le")
+    if low is not None and high is not None:
+        allowed = f"{low} to {high}"
+    elif low is not None:
+        allowed = f"more than {low}" if strict else f"{low} or more"
+    else:
+        allowed = f"{high} or less"
+
+    def parse(text: str) -> int | float:
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"{text!r} is not a {_NUMBER[kind]}") from None
+        too_low = low is not None and (value <= low if strict else value < low)
+        if too_low or (high is not None and value > high):
+            raise argparse.ArgumentTypeError(f"{text} is not allowed: give {allowed}")
+        return value
+
+    return parse
+
+
+def _bound(bounds: tuple[Any, ...], kind: type, name: str) -> int | float | None:
+    """The number of the first ``kind`` constraint in ``bounds`` (``Gt(0)``, ``"gt"`` -> 0)."""
+    for bound in bounds:
+        value = getattr(bound, name, None) if isinstance(bound, kind) else None
+        if isinstance(value, int | float):
+            return value
+    return None
+
+
+_NUMBER = {int: "whole number", float: "number"}
+POSITIVE_INT = number_type(int, annotated_types.Gt(0))
+"""A count (``--workers``, ``--episodes``): 1 or more."""
 
 
 def _comma_list(text: str) -> tuple[str, ...]:
@@ -129,6 +183,9 @@ def _argument(name: str, field: FieldInfo, option: CliOption) -> dict[str, Any]:
     if get_origin(kind) is tuple:  # given comma-separated
         text = None if default is None else ",".join(default)
         return {"type": _comma_list, "default": text, "metavar": option.metavar}
+    bounds = [*_unwrap(field.annotation)[1], *field.metadata]
+    if kind in (int, float) and any(isinstance(b, annotated_types.BaseMetadata) for b in bounds):
+        return {"type": number_type(kind, *bounds), "default": default, "metavar": option.metavar}
     if kind in (str, int, float):
         return {"type": kind, "default": default, "metavar": option.metavar}
     raise TypeError(f"ConvertConfig.{name} ({kind}): no command-line form; give it a CliOption(named=...)")

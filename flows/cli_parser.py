@@ -10,8 +10,10 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable, Mapping
 
+import annotated_types
+
 from bagport.config import ConvertConfig
-from flows.cli_config import add_config_options
+from flows.cli_config import POSITIVE_INT, add_config_options, number_type
 from flows.cli_push import add_push_command, add_push_options
 
 __all__ = ["Handler", "build_parser"]
@@ -96,7 +98,9 @@ def _add_qa(sub: Subparsers, handler: Handler) -> argparse.ArgumentParser:
     qa.add_argument("--contract", required=True, help="contract YAML the episodes are scored against")
     qa.add_argument("--qa", default=None, help="QA thresholds YAML (default: built-in)")
     qa.add_argument("--report", default=None, help="write a self-contained HTML report here")
-    qa.add_argument("--workers", type=int, default=None, help="bags scored in parallel (default: CPU count)")
+    qa.add_argument(
+        "--workers", type=POSITIVE_INT, default=None, help="bags scored in parallel (default: CPU count)"
+    )
     qa.add_argument(
         "--keep-failed",
         action="store_true",
@@ -138,7 +142,10 @@ def _add_dataset_commands(sub: Subparsers, handlers: Mapping[str, Handler]) -> N
         help="repo id LeRobot loads the dataset under (default: local/<folder name>)",
     )
     validate.add_argument(
-        "--every", type=int, default=1, help="decode every n-th frame plus each episode's last (default: all)"
+        "--every",
+        type=POSITIVE_INT,
+        default=1,
+        help="decode every n-th frame plus each episode's last (default: all)",
     )
     validate.set_defaults(func=handlers["validate"])
 
@@ -182,7 +189,9 @@ def _add_contract(sub: Subparsers, handlers: Mapping[str, Handler]) -> list[argp
         "--out", default=None, help="write the draft here, a file that does not exist yet (default: print it)"
     )
     init.add_argument("--robot-type", default="my_robot", help="the draft's robot_type (default: my_robot)")
-    init.add_argument("--fps", type=int, default=30, help="the draft's frames per second (default: 30)")
+    init.add_argument(
+        "--fps", type=POSITIVE_INT, default=30, help="the draft's frames per second (default: 30)"
+    )
     init.set_defaults(func=handlers["contract init"])
     return [check, init]
 
@@ -195,8 +204,10 @@ def _add_synth(sub: Subparsers, handler: Handler) -> None:
         "ROS 1 .bag in turn), plus DIR/manifest.yaml.",
     )
     synth.add_argument("--out", required=True, help="folder for the bags and manifest.yaml")
-    synth.add_argument("--episodes", type=int, default=4, help="bags to write (default: 4)")
-    synth.add_argument("--duration", type=float, default=3.0, help="seconds per episode")
+    synth.add_argument("--episodes", type=POSITIVE_INT, default=4, help="bags to write (default: 4)")
+    synth.add_argument(
+        "--duration", type=number_type(float, annotated_types.Gt(0)), default=3.0, help="seconds per episode"
+    )
     synth.add_argument(
         "--seed", type=int, default=0, help="first random seed; bag i uses seed + i (default: 0)"
     )

@@ -62,17 +62,22 @@ class ManifestError(BagportError):
         fix: str = "",
         row: int | None = None,
         column: str | None = None,
+        line: int | None = None,
     ) -> None:
         self.file = file
         self.entry = entry
         self.row = row
         """Line of a CSV manifest (the header is row 1); a CSV entry is named by its row, not ``bags[i]``."""
         self.column = column
+        self.line = line
+        """1-based line of a YAML manifest the problem is on."""
         where = f"{file}" if file else "manifest"
         if row is not None:
             where += f", row {row}" + (f" (column {column})" if column else "")
         elif entry is not None:
             where += f", bags[{entry}]"
+        if line is not None:
+            where += f": line {line}"
         super().__init__(f"{where}: {what}" + (f" Fix: {fix}" if fix else ""))
 
 

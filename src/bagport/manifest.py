@@ -29,7 +29,14 @@ from bagport.errors import ManifestError
 from bagport.manifest_csv import csv_entries
 from bagport.timewindow import WHOLE_BAG, TimeWindow
 from bagport.uris import is_local, protocol_of, read_text_file
-from bagport.yamlsource import YamlJson, explain_validation, load_yaml, primary_error
+from bagport.yamlsource import (
+    DuplicateKeyError,
+    YamlJson,
+    YamlSource,
+    explain_validation,
+    load_yaml,
+    primary_error,
+)
 
 __all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
 
@@ -159,31 +166,52 @@ def _csv_model(text: str, source: str) -> tuple[list[_Entry], list[int]]:
 
 
 def _yaml_model(text: str, source: str) -> _Manifest:
-    try:
-        parsed = load_yaml(text, source)
-    except yaml.YAMLError as err:
-        raise ManifestError(f"is not valid YAML: {err}", file=source) from err
+    parsed = _parse_yaml(text, source)
+    if parsed.data is None:  # 0 bytes, or only comments
+        raise ManifestError(
+            "has no 'bags:' list: the file is empty or holds only comments",
+            file=source,
+            fix="write 'bags:' then one '- uri: path/to/bag' line per bag (an entry may also give task, "
+            "metadata, start_s, end_s).",
+        )
     try:
         model = _Manifest.model_validate(parsed.data)
     except pydantic.ValidationError as err:
         first = primary_error(err)
         loc = tuple(first["loc"])
-        entry = loc[1] if len(loc) > 1 and loc[0] == "bags" and isinstance(loc[1], int) else None
-        problem = explain_validation(
-            err,
-            parsed,
-            _Manifest,
-            "a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries.",
-        )  # a misspelt key gets the nearest one ("did you mean 'uri'?")
+        problem = explain_validation(err, parsed, _Manifest, _FORMAT)
+        # a misspelt key gets the nearest one ("did you mean 'uri'?")
         raise ManifestError(
-            f"line {problem.line}: {problem.field or 'top level'}: {problem.what}",
+            f"{problem.field or 'top level'}: {problem.what}",
             file=source,
-            entry=entry,
+            entry=_entry_of(loc),
+            line=problem.line,
             fix=_NOT_JSON_FIX if first["type"] == "invalid-json-value" else problem.fix,
         ) from err
     return model
 
 
+def _parse_yaml(text: str, source: str) -> YamlSource:
+    try:
+        return load_yaml(text, source)
+    except DuplicateKeyError as err:
+        raise ManifestError(
+            f"key {err.key!r} is given twice (also line {err.first_line}); YAML would silently keep the last",
+            file=source,
+            entry=_entry_of(err.loc),
+            line=err.line,
+            fix=f"keep one '{err.key}:' (another bag is its own '- uri: ...' entry in the one 'bags:' list).",
+        ) from err
+    except yaml.YAMLError as err:
+        raise ManifestError(f"is not valid YAML: {err}", file=source) from err
+
+
+def _entry_of(loc: tuple[int | str, ...]) -> int | None:
+    """``i`` of ``bags[i]`` when ``loc`` is inside one entry of the list."""
+    return loc[1] if len(loc) > 1 and loc[0] == "bags" and isinstance(loc[1], int) else None
+
+
+_FORMAT = "a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries."
 _NOT_JSON_FIX = (
     "metadata values are JSON values: text, numbers, true/false, lists and mappings (dates and times are "
     "read as text)."

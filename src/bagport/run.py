@@ -12,6 +12,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any
 
+from fsspec import AbstractFileSystem
+
 from bagport import __version__
 from bagport.append_plan import bags_to_append, check_append_fits
 from bagport.bags import read_msg_path, source_stamp
@@ -20,7 +22,7 @@ from bagport.contract import ContractPlan, FeatureKind, parse_contract
 from bagport.dataset import DatasetReport
 from bagport.dataset.history import dataset_bags, recorded_failures, recorded_write_key
 from bagport.dataset.repair import repair_dataset
-from bagport.dataset.replace import refuse_existing
+from bagport.dataset.replace import refuse_existing, refuse_output_in_a_bag
 from bagport.episode import EpisodeRequest, convert_episode, episode_id_for
 from bagport.episode.staged import PlannedEpisode, list_staged, remove_finished_staging, split_staged
 from bagport.formats import check_format_outputs
@@ -29,7 +31,7 @@ from bagport.qa import QAConfig, load_qa_config
 from bagport.scratch import scratch_folder
 from bagport.segment import segment_request, segments_bags
 from bagport.selection import EpisodeFailure
-from bagport.uris import is_local, output_fs, read_text, require_bucket
+from bagport.uris import check_writable, is_local, output_fs, read_text, require_bucket
 from bagport.video import EncoderSettings
 from bagport.video.encode import check_encoder
 from bagport.window_overlaps import WindowOverlap, window_overlaps
@@ -96,12 +98,7 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     encoder = EncoderSettings.from_dict(config.encoder)
     qa = _qa_config(config)
     manifest = _manifest(config)
-    fs, out_path = output_fs(config.output, "--output", beside=True)
-    require_bucket(fs, out_path, config.output)
-    staging = config.resolved_staging()
-    staging_fs, staging_path = output_fs(staging, "--staging")
-    require_bucket(staging_fs, staging_path, staging)
-    repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to
+    fs, out_path, staging = _ready_output(config, manifest)
     stamps: dict[str, str] = {}
 
     def stamp_of(uri: str) -> str:  # each bag's files are listed at most once per plan
@@ -148,10 +145,31 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
         overlaps=window_overlaps(bags, held, whole_bag_split=segments_bags(contract)),
     )  # fmt: skip
     plan = _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
-    if plan.requests and any(f.kind is FeatureKind.VIDEO for f in contract.features):
-        with scratch_folder("encoder") as folder:
-            check_encoder(encoder, folder)  # settings the encoder refuses: said once, not by every episode
+    _check_encoder_once(plan, encoder)
     return plan
+
+
+def _check_encoder_once(plan: RunPlan, encoder: EncoderSettings) -> None:
+    """Settings the encoder refuses, said once at the plan instead of by every episode (only when episodes
+    will be converted and the contract has videos)."""
+    if plan.requests and any(f.kind is FeatureKind.VIDEO for f in plan.contract.features):
+        with scratch_folder("encoder") as folder:
+            check_encoder(encoder, folder)
+
+
+def _ready_output(config: ConvertConfig, manifest: Manifest) -> tuple[AbstractFileSystem, str, str]:
+    """The output's and the staging store's places checked (their buckets exist, the output is in none of
+    the run's bags) and the output repaired; its filesystem, path, and the staging URI."""
+    fs, out_path = output_fs(config.output, "--output")
+    require_bucket(fs, out_path, config.output)
+    staging = config.resolved_staging()
+    staging_fs, staging_path = output_fs(staging, "--staging")
+    require_bucket(staging_fs, staging_path, staging)
+    refuse_output_in_a_bag(config.output, [bag.uri for bag in manifest.bags])  # before anything writes there
+    check_writable(fs, out_path, config.output, "--output", beside=True)
+    check_writable(staging_fs, staging_path, staging, "--staging")
+    repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to
+    return fs, out_path, staging
 
 
 def _held_windows(

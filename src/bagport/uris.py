@@ -80,11 +80,10 @@ def read_text(uri: str, what: str) -> str:
     )
 
 
-def output_fs(uri: str, what: str, *, beside: bool = False) -> tuple[AbstractFileSystem, str]:
+def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:
     """fsspec's file system and path for an output or staging ``uri`` (``what``: its option); a protocol
-    fsspec does not know (a typo, or its package not installed) is one paragraph, and so is a local path
-    this user cannot write (checked where it would be made; with ``beside``, also in its parent, where a
-    dataset's build folder goes)."""
+    fsspec does not know (a typo, or its package not installed), or a local path that is a file or lies
+    under one, is one paragraph."""
     if not uri.strip():
         raise DatasetWriteError(
             f"{what} is empty; nothing was converted or written. Fix: give the dataset's folder or URI."
@@ -97,25 +96,41 @@ def output_fs(uri: str, what: str, *, beside: bool = False) -> tuple[AbstractFil
             "path, or a URI fsspec knows (s3://, gs://, ...) with its package installed (s3fs, gcsfs, ...)."
         ) from err
     if is_local(fs):
-        local = Path(str(path))
-        for folder in (local, local.parent) if beside else (local,):
-            _check_local_folder(folder, uri, what)
+        _nearest_folder(Path(str(path)), uri, what)
     return fs, str(path)
 
 
-def _check_local_folder(path: Path, uri: str, what: str) -> None:
-    """The nearest of ``path`` and its parents that exists must be a folder that takes a new folder: a file
-    there, or a folder this user cannot write (permissions, a read-only mount, /proc), failed every episode
-    with a bare ``NotADirectoryError`` or ``PermissionError``; said once, before anything converts."""
-    folder = next((f for f in (path, *path.parents) if f.exists()), None)
-    if folder is None:
+def check_writable(fs: AbstractFileSystem, path: str, uri: str, what: str, *, beside: bool = False) -> None:
+    """A local ``path`` (of :func:`output_fs`) this user cannot write is one paragraph: a folder is made and
+    removed where the run will write (the nearest folder of ``path`` that exists; with ``beside``, also its
+    parent's, where a dataset's build folder goes). Object stores are not checked here."""
+    if not is_local(fs):
         return
-    if not folder.is_dir():
+    local = Path(path)
+    for folder in (local, local.parent) if beside else (local,):
+        _check_local_folder(folder, uri, what)
+
+
+def _nearest_folder(path: Path, uri: str, what: str) -> Path | None:
+    """The nearest of ``path`` and its parents that exists (``None``: none does); a file there, where every
+    episode would fail to stage with a bare ``NotADirectoryError``, is said once, before anything converts."""
+    folder = next((f for f in (path, *path.parents) if f.exists()), None)
+    if folder is not None and not folder.is_dir():
         where = "is a file" if folder == path else f"lies under {folder}, which is a file"
         raise DatasetWriteError(
             f"{what} {uri} {where}; nothing was converted or written. Fix: give a folder path (one that "
             "does not exist yet is made)."
         )
+    return folder
+
+
+def _check_local_folder(path: Path, uri: str, what: str) -> None:
+    """The nearest folder of ``path`` must take a new folder: one this user cannot write (permissions, a
+    read-only mount, /proc) failed every episode with a bare ``PermissionError``; said once, before anything
+    converts."""
+    folder = _nearest_folder(path, uri, what)
+    if folder is None:
+        return
     try:
         Path(tempfile.mkdtemp(prefix=".bagport-write-check-", dir=folder)).rmdir()
     except OSError as err:

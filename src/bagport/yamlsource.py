@@ -18,10 +18,12 @@ import yaml
 from pydantic_core import ErrorDetails
 
 __all__ = [
+    "DuplicateKeyError",
     "ValidationProblem",
     "YamlJson",
     "YamlSource",
     "explain_validation",
+    "field_of",
     "load_plain",
     "load_yaml",
     "primary_error",
@@ -81,9 +83,56 @@ def _child(node: yaml.Node | None, part: int | str) -> tuple[yaml.Node, yaml.Nod
     return None
 
 
+class DuplicateKeyError(yaml.MarkedYAMLError):
+    """A mapping gives one key twice; YAML itself would keep the last value without a word.
+
+    A ``yaml.YAMLError`` (``problem_mark`` at the second key), so a caller that reports bad YAML reports it
+    too; ``loc`` is the path to the mapping (``("bags", 0)``) for callers that name an entry.
+    """
+
+    def __init__(self, key: str, loc: tuple[int | str, ...], first: yaml.Mark, again: yaml.Mark) -> None:
+        self.key = key
+        self.loc = loc
+        self.line = again.line + 1
+        self.first_line = first.line + 1
+        super().__init__(problem=f"key {key!r} is given twice (lines {self.first_line} and {self.line})")
+        self.problem_mark = again
+
+    def __str__(self) -> str:  # MarkedYAMLError's adds a snippet of the file over several lines
+        return f"line {self.line}: {self.problem}"
+
+
+def _refuse_duplicate_keys(root: yaml.Node) -> None:
+    """Raise :class:`DuplicateKeyError` for the first mapping under ``root`` that gives a key twice
+    (a loop, not recursion: a fuzzed file nests deeper than Python's stack)."""
+    stack: list[tuple[yaml.Node, tuple[int | str, ...]]] = [(root, ())]
+    seen: set[int] = set()
+    while stack:
+        node, loc = stack.pop()
+        if id(node) in seen:  # an alias: its anchor was checked (and may contain itself)
+            continue
+        seen.add(id(node))
+        if isinstance(node, yaml.SequenceNode):
+            stack.extend((item, (*loc, index)) for index, item in reversed(list(enumerate(node.value))))
+        elif isinstance(node, yaml.MappingNode):
+            first: dict[tuple[str, str], yaml.Mark] = {}
+            children: list[tuple[yaml.Node, tuple[int | str, ...]]] = []
+            for key_node, value_node in node.value:
+                if isinstance(key_node, yaml.ScalarNode) and key_node.tag != "tag:yaml.org,2002:merge":
+                    key = (key_node.tag, key_node.value)
+                    if key in first:
+                        raise DuplicateKeyError(key_node.value, loc, first[key], key_node.start_mark)
+                    first[key] = key_node.start_mark
+                    children.append((value_node, (*loc, key_node.value)))
+            stack.extend(reversed(children))  # popped in the file's order: the first duplicate is reported
+
+
 def load_yaml(text: str, name: str) -> YamlSource:
-    """Parse ``text``; raises ``yaml.YAMLError`` (with its own mark) on bad syntax."""
+    """Parse ``text``; raises ``yaml.YAMLError`` (with its own mark) on bad syntax, and its
+    :class:`DuplicateKeyError` when a mapping gives a key twice (YAML would keep the last silently)."""
     root = yaml.compose(text, Loader=_LOADER)
+    if root is not None:
+        _refuse_duplicate_keys(root)
     data = yaml.load(text, Loader=_LOADER)
     return YamlSource(name=name, data=data, root=root)
 
@@ -91,6 +140,11 @@ def load_yaml(text: str, name: str) -> YamlSource:
 def load_plain(text: str) -> Any:
     """``yaml.safe_load`` (with libyaml where available)."""
     return yaml.load(text, Loader=_LOADER)
+
+
+def field_of(loc: Sequence[int | str]) -> str:
+    """A value path as the user reads it: ``("bags", 0, "uri")`` -> ``bags[0].uri``."""
+    return ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in loc).replace(".[", "[")
 
 
 def primary_error(err: pydantic.ValidationError) -> ErrorDetails:
@@ -117,7 +171,7 @@ def explain_validation(
     errors = err.errors()
     first = primary_error(err)
     loc = tuple(first["loc"])
-    field = ".".join(str(p) if isinstance(p, str) else f"[{p}]" for p in loc).replace(".[", "[")
+    field = field_of(loc)
     msg = first["msg"].removeprefix("Value error, ")
     if first["type"] == "missing":
         msg = "required field is missing"

@@ -147,3 +147,39 @@ def test_a_manifest_that_is_not_text_an_infinite_window_or_a_folder_is_one_parag
         load_manifest(str(endless))
     with pytest.raises(ManifestError, match=r"cannot be read \(Is a directory\)"):
         load_manifest(str(tmp_path))
+
+
+@pytest.mark.parametrize(
+    ("text", "entry", "line", "key"),
+    [
+        pytest.param("bags:\n  - uri: a.mcap\n    uri: b.mcap\n", 0, 3, "uri", id="uri-twice"),
+        pytest.param("bags:\n  - uri: a.mcap\nbags:\n  - uri: b.mcap\n", None, 3, "bags", id="bags-twice"),
+        pytest.param(
+            "bags:\n  - uri: a.mcap\n  - uri: b.mcap\n    metadata: {op: alice, op: bob}\n",
+            1,
+            4,
+            "op",
+            id="metadata-key-twice",
+        ),
+    ],
+)
+def test_a_key_given_twice_names_the_entry_and_its_line(
+    tmp_path: Path, text: str, entry: int | None, line: int, key: str
+) -> None:
+    """YAML keeps the last of two equal keys without a word: a manifest refuses them."""
+    _touch(tmp_path / "a.mcap")
+    _touch(tmp_path / "b.mcap")
+    with pytest.raises(ManifestError, match=rf"key '{key}' is given twice") as caught:
+        parse_manifest(text, "m.yaml", base_dir=str(tmp_path))
+    assert (caught.value.file, caught.value.entry, caught.value.line) == ("m.yaml", entry, line)
+    assert f"Fix: keep one '{key}:'" in str(caught.value)
+
+
+@pytest.mark.parametrize("text", ["", "# bags to convert\n\n# (none yet)\n"], ids=["0-bytes", "comments"])
+def test_an_empty_manifest_says_it_has_no_bags_list(tmp_path: Path, text: str) -> None:
+    manifest = tmp_path / "m.yaml"
+    manifest.write_text(text)
+    with pytest.raises(ManifestError, match=r"m\.yaml: has no 'bags:' list: the file is empty") as caught:
+        load_manifest(str(manifest))
+    assert caught.value.line is None and "line None" not in str(caught.value)
+    assert "Fix: write 'bags:' then one '- uri: path/to/bag' line per bag" in str(caught.value)

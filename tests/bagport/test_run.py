@@ -261,6 +261,23 @@ def test_overwrite_never_removes_a_folder_that_is_not_a_dataset(fleet: Path, tmp
     assert sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*")) == before
 
 
+@pytest.mark.parametrize("append", [False, True], ids=["new", "append"])
+def test_an_output_inside_a_bag_folder_is_refused_before_anything_is_written(
+    fleet: Path, tmp_path: Path, append: bool
+) -> None:
+    """``--output bags/ep1/out`` used to write the dataset into the recording."""
+    config = ConvertConfig(
+        manifest=str(fleet / "manifest.yaml"), contract=str(SAMPLE_CONTRACT), output=str(fleet / "c/out"),
+        staging=str(tmp_path / "staging"), encoder=FAST_CODEC, append=append,
+    )  # fmt: skip
+    before = sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*"))
+    with pytest.raises(
+        DatasetWriteError, match=r"--output .*/c/out is inside the bag .*/c: the dataset would"
+    ):
+        plan_run(config)
+    assert sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*")) == before
+
+
 def _convert_all(
     plan: RunPlan, *, retryable: bool = False
 ) -> tuple[list[PlannedEpisode], list[EpisodeFailure]]:

@@ -12,7 +12,7 @@ from s3fs import S3FileSystem
 from bagport.config import ConvertConfig
 from bagport.errors import ContractError, DatasetWriteError
 from bagport.run import plan_run
-from bagport.uris import output_fs, read_text
+from bagport.uris import check_writable, output_fs, read_text
 from flows.cli import main
 from tests.helpers import SAMPLE_CONTRACT
 from tests.s3 import moto_s3
@@ -114,11 +114,13 @@ def test_a_local_output_or_staging_nobody_can_write_is_refused_before_converting
     with pytest.raises(
         DatasetWriteError, match=r"--output /proc/bagport/ds: nothing can be written in /proc \(No such file"
     ):
-        output_fs("/proc/bagport/ds", "--output", beside=True)
+        check_writable(
+            *output_fs("/proc/bagport/ds", "--output"), "/proc/bagport/ds", "--output", beside=True
+        )
     with pytest.raises(
         DatasetWriteError, match=r"--staging /proc/st: nothing can be written in /proc.*read-only"
     ):
-        output_fs("/proc/st", "--staging")
+        check_writable(*output_fs("/proc/st", "--staging"), "/proc/st", "--staging")
     locked = tmp_path / "locked"
     locked.mkdir()
     (locked / "ds").mkdir()
@@ -126,7 +128,11 @@ def test_a_local_output_or_staging_nobody_can_write_is_refused_before_converting
     try:
         if os.geteuid() != 0:  # root writes whatever the mode says
             with pytest.raises(DatasetWriteError, match=rf"nothing can be written in {locked} \(Permission"):
-                output_fs(str(locked / "ds"), "--output", beside=True)
-        assert output_fs(str(locked / "ds"), "--staging")[1] == str(locked / "ds")  # staging: itself only
+                check_writable(
+                    *output_fs(str(locked / "ds"), "--output"), str(locked / "ds"), "--output", beside=True
+                )
+        check_writable(
+            *output_fs(str(locked / "ds"), "--staging"), str(locked / "ds"), "--staging"
+        )  # itself only
     finally:
         locked.chmod(0o700)

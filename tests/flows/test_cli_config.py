@@ -52,8 +52,9 @@ def test_types_choices_and_defaults_come_from_the_fields() -> None:
     assert actions["runner"].choices == ["process", "thread", "dask", "ray"]
     assert actions["runner"].default == "process"
     assert actions["on_qa_fail"].choices == ["exclude", "keep", "fail_run"]
-    assert (actions["workers"].type, actions["chunks_size"].default) == (int, 1000)
-    assert actions["data_files_size_in_mb"].type is float
+    assert actions["chunks_size"].default == 1000
+    workers, size = actions["workers"].type, actions["data_files_size_in_mb"].type
+    assert callable(workers) and callable(size) and (workers("3"), size("1.5")) == (3, 1.5)
     assert actions["overwrite"].nargs == 0 and actions["overwrite"].default is False
     assert actions["hdf5_jpeg_quality"].metavar == "QUALITY"
     assert _config(
@@ -193,3 +194,61 @@ def test_push_to_hub_takes_the_repo_id_from_the_config_file(
     err = capfd.readouterr().err
     assert "HF_TOKEN is not set" in err and "--repo-id" not in err
     assert not (tmp_path / "ds").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "refused"),
+    [
+        pytest.param(
+            ["convert", "--workers", "0"],
+            "argument --workers: 0 is not allowed: give 1 or more",
+            id="convert",
+        ),
+        pytest.param(
+            ["convert", "--workers", "-2"],
+            "argument --workers: -2 is not allowed: give 1 or more",
+            id="negative",
+        ),
+        pytest.param(
+            ["convert", "--workers", "two"], "argument --workers: 'two' is not a whole number", id="text"
+        ),
+        pytest.param(
+            ["convert", "--chunks-size", "0"], "argument --chunks-size: 0 is not allowed", id="chunks"
+        ),
+        pytest.param(
+            ["convert", "--data-files-size-in-mb", "0"], "give more than 0", id="float-from-positive-float"
+        ),
+        pytest.param(
+            ["convert", "--hdf5-jpeg", "101"],
+            "argument --hdf5-jpeg: 101 is not allowed: give 1 to 100",
+            id="range",
+        ),
+        pytest.param(
+            ["qa", "--manifest", "m", "--contract", "c", "--workers", "0"],
+            "argument --workers: 0 is not allowed: give 1 or more",
+            id="qa",
+        ),
+        pytest.param(["validate", "d", "--every", "0"], "argument --every: 0 is not allowed", id="validate"),
+        pytest.param(
+            ["synth", "--out", "s", "--episodes", "0"], "argument --episodes: 0 is not allowed", id="synth"
+        ),
+        pytest.param(
+            ["synth", "--out", "s", "--duration", "-1"],
+            "argument --duration: -1 is not allowed: give more than 0",
+            id="duration",
+        ),
+        pytest.param(
+            ["contract", "init", "--bag", "b", "--fps", "0"], "argument --fps: 0 is not allowed", id="init"
+        ),
+    ],
+)
+def test_a_count_out_of_range_is_refused_by_the_parser(
+    argv: list[str], refused: str, capfd: pytest.CaptureFixture[str]
+) -> None:
+    """``--workers 0`` used to mean 'CPU count' for qa (and -2 'one'): every count, on every command, is
+    refused before anything runs, the option named, exit code 2."""
+    with pytest.raises(SystemExit) as caught:
+        build_parser().parse_args(argv)
+    assert caught.value.code == 2
+    err = capfd.readouterr().err
+    assert refused in err and "Traceback" not in err

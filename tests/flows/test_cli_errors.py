@@ -264,6 +264,10 @@ def test_a_codec_or_config_file_that_is_not_yaml_is_one_paragraph(
     )
     assert main(["convert", "--config", str(broken)]) == 2
     assert f"--config: {broken} is not valid YAML at line 2" in capfd.readouterr().err
+    twice = tmp_path / "twice.yaml"
+    twice.write_text("output: a\noutput: b\n")
+    assert main(["convert", "--config", str(twice)]) == 2
+    assert "line 2, column 1 (key 'output' is given twice (lines 1 and 2))" in capfd.readouterr().err
     assert main([*argv, "--codec", str(tmp_path / "missing.yaml")]) == 2
     assert (
         "no such file, and no preset of that name. Fix: give a preset (archival, h264-fast, lerobot-default)"

@@ -76,7 +76,8 @@ def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
             uri=uri,
             fix="point the manifest at a rosbag2 folder, an .mcap, a .db3 or a ROS 1 .bag.",
         )
-    info = read_metadata(path, uri) or {}
+    metadata = read_metadata(path, uri)
+    info = metadata or {}
     storage_id = str(info.get("storage_identifier", ""))
     try:
         listed: list[Path | RemotePath] = list(path.iterdir())
@@ -103,14 +104,49 @@ def detect_storage(path: Path | RemotePath, uri: str) -> Storage:
             uri=uri,
             fix="point the manifest at a rosbag2 folder or at the bag file itself.",
         )
-    if storage_id in (Storage.MCAP, Storage.SQLITE3) and not _has_magic(files[0]):
+    first = _first_of_the_recording(files, storage_id, uri, has_metadata=metadata is not None)
+    if storage_id in (Storage.MCAP, Storage.SQLITE3) and not _has_magic(first):
         raise BagReadError(
-            f"{files[0].name} has no ROS 1, MCAP or SQLite signature at its start (its first 16 bytes are "
+            f"{first.name} has no ROS 1, MCAP or SQLite signature at its start (its first 16 bytes are "
             f"damaged; metadata.yaml says {storage_id})",
             uri=uri,
             fix="copy the bag again from the robot or a backup.",
         )
-    return _file_storage(files[0], uri)
+    return _file_storage(first, uri)
+
+
+def _first_of_the_recording(
+    files: list[Path | RemotePath], storage_id: str, uri: str, *, has_metadata: bool
+) -> Path | RemotePath:
+    """The data file whose content tells the storage. A folder holding MCAP and SQLite files (by their
+    content) is the storage its ``metadata.yaml`` names (the layout warns that the others are ignored), as
+    rosbag2 reads it; without one naming either, which is the recording is unknown, so it is refused."""
+    by_suffix: dict[str, Path | RemotePath] = {}
+    for path in files:
+        by_suffix.setdefault(path.suffix, path)
+    if len(by_suffix) < 2:
+        return files[0]
+    by_content = {storage_by_content(path): path for path in by_suffix.values()}
+    if Storage.MCAP not in by_content or Storage.SQLITE3 not in by_content:
+        return files[0]  # a file named for another storage: read by its content
+    if storage_id in by_content:
+        return by_content[Storage(storage_id)]
+    said = (
+        f"its metadata.yaml names neither (storage_identifier {storage_id!r})"
+        if has_metadata
+        else ("no metadata.yaml says which is the recording")
+    )
+    raise BagReadError(
+        f"holds both MCAP ({_names(files, '.mcap')}) and SQLite ({_names(files, '.db3')}) data files, and {said}",
+        uri=uri,
+        fix="move the files that are not part of this recording out of the folder, or write its metadata.yaml "
+        "with `ros2 bag reindex FOLDER -s mcap` (or `-s sqlite3`).",
+    )
+
+
+def _names(files: list[Path | RemotePath], suffix: str) -> str:
+    names = [path.name for path in files if path.suffix == suffix]
+    return ", ".join(names[:3]) + (f" and {len(names) - 3} more" if len(names) > 3 else "")
 
 
 def _has_magic(path: Path | RemotePath) -> bool:

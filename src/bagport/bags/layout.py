@@ -86,6 +86,26 @@ def _metadata_problem(metadata: dict[str, Any], present: list[BagPath], storage:
     return None
 
 
+def _other_recording(metadata: dict[str, Any], present: list[BagPath], storage: Storage) -> list[BagPath]:
+    """Data files of the other storage (by suffix and content) that ``metadata.yaml`` does not list, beside a
+    recording of the ``storage`` it names: not part of it, as rosbag2 reads only the files it lists."""
+    if str(metadata.get("storage_identifier") or "") != storage:
+        return []
+    listed = set(_listed(metadata))
+    others = [p for p in present if p.suffix in SUFFIX.values() and p.suffix != SUFFIX[storage]]
+    return [p for p in others if p.name not in listed and storage_by_content(p) not in (storage, None)]
+
+
+def _ignoring(ignored: list[BagPath], storage: Storage) -> list[str]:
+    if not ignored:
+        return []
+    names = ", ".join(p.name for p in ignored)
+    return [
+        f"{names} ignored: not part of the {storage} recording metadata.yaml describes (Fix: move it out of "
+        "the bag folder)"
+    ]
+
+
 def _refuse_missing_files(metadata: dict[str, Any], present: list[BagPath], uri: str) -> None:
     """A recording whose ``metadata.yaml`` lists more data files than the folder holds, some of them absent,
     is incomplete (a split file lost, or a copy not finished): converted, it would be a shorter episode that
@@ -113,11 +133,15 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
     present = _data_files(path)
     metadata = read_metadata(path, uri)
     if metadata is not None:
+        ignored = _other_recording(metadata, present, storage)
+        present = [p for p in present if p not in ignored]
         _refuse_missing_files(metadata, present, uri)
         problem = _metadata_problem(metadata, present, storage)
         if problem is None:
             folder = _alias(path, "bag", scratch) if path.suffix == ".bag" else path
-            return ReadPlan([folder], [*present, path / "metadata.yaml"], present)
+            return ReadPlan(
+                [folder], [*present, path / "metadata.yaml"], present, _ignoring(ignored, storage)
+            )
         mode = str(metadata.get("compression_mode") or "").lower()
         if mode == "file":
             raise BagReadError(
@@ -131,7 +155,7 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
             renamed.opened(usable, scratch),
             [*present, path / "metadata.yaml"],
             usable,
-            [warning],
+            [*_ignoring(ignored, storage), warning],
             message_compression=mode == "message",
         )
     usable, renamed = _usable(present, storage, uri)

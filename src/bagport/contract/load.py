@@ -10,7 +10,7 @@ from bagport.contract.plan import ContractPlan, compile_contract
 from bagport.decode.custom import resolve_decoder
 from bagport.errors import ContractError
 from bagport.uris import read_text_file
-from bagport.yamlsource import explain_validation, load_yaml
+from bagport.yamlsource import DuplicateKeyError, explain_validation, field_of, load_yaml
 
 __all__ = ["load_contract", "parse_contract"]
 
@@ -29,6 +29,14 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
     """Parse and validate contract YAML ``text``; ``name`` is used in error messages."""
     try:
         source = load_yaml(text, name)
+    except DuplicateKeyError as err:
+        raise ContractError(
+            f"key {err.key!r} is given twice (also line {err.first_line}); YAML would silently keep the last",
+            file=name,
+            line=err.line,
+            field=field_of(err.loc) or None,
+            fix=f"keep one '{err.key}:'.",
+        ) from err
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         line = mark.line + 1 if mark is not None else None

@@ -339,11 +339,11 @@ def _feature(key: str, group: list[tuple[SourceSpec, str | None]], source_name: 
     dtype = dtypes.pop() if dtypes else DEFAULT_VECTOR_DTYPE
     if dtype not in _NUMERIC_DTYPES:
         raise ContractError(
-            f"dtype {dtype!r} of key {key!r} is not a numeric dtype",
+            f"dtype {dtype!r} of key {key!r} is not one a numeric feature can have",
             file=source_name,
-            line=sources[0].line,
+            line=next(src.line for src, given in group if given == dtype),  # the entry that asks for it
             field=f"{key}.dtype",
-            fix=f"use one of {sorted(_NUMERIC_DTYPES)}.",
+            fix=f"use one of {sorted(_NUMERIC_DTYPES)} (a narrower integer fits a wider one: int8 in int16).",
         )
     return FeatureSpec(key, FeatureKind.VECTOR, dtype, sources)
 

@@ -20,7 +20,7 @@ from bagport.errors import DatasetWriteError
 from bagport.scratch import scratch_folder
 from bagport.uris import is_local
 
-__all__ = ["publish_built", "refuse_existing"]
+__all__ = ["publish_built", "refuse_existing", "refuse_output_in_a_bag"]
 
 
 def refuse_existing(output: str, *, overwrite: bool, inputs: Sequence[str] = ()) -> None:
@@ -51,6 +51,21 @@ def refuse_existing(output: str, *, overwrite: bool, inputs: Sequence[str] = ())
                 f"{output} holds the bag {uri}, and --overwrite would remove it with the old dataset; "
                 "nothing was written. Fix: keep the bags outside the dataset's folder, or write to a new "
                 "--output."
+            )
+
+
+def refuse_output_in_a_bag(output: str, inputs: Sequence[str]) -> None:
+    """The converse of :func:`refuse_existing`'s check: an ``output`` that is, or is inside, one of the run's
+    ``inputs`` (a rosbag2 folder) would put the dataset (and its temporary folders) into a recording."""
+    fs, out_path = url_to_fs(output)
+    out_real = _real(fs, out_path).rstrip("/")
+    for uri in inputs:
+        bag_fs, bag_path = url_to_fs(uri)
+        bag_real = _real(bag_fs, bag_path).rstrip("/")
+        if bag_fs.protocol == fs.protocol and (out_real == bag_real or out_real.startswith(bag_real + "/")):
+            raise DatasetWriteError(
+                f"--output {output} is inside the bag {uri}: the dataset would be written into a recording of "
+                "the run; nothing was written. Fix: choose an --output outside the bags' folders."
             )
 
 

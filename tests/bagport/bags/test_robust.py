@@ -401,3 +401,57 @@ def test_a_folder_of_ros1_bags_says_so_and_how_to_convert_them(tmp_path: Path) -
     message = str(caught.value)
     assert "is a folder of 2 ROS 1 bag(s) (a.bag, b.bag), not one recording" in message
     assert "--glob 'FOLDER/*.bag'" in message
+
+
+def _mcap_and_sqlite(tmp_path: Path, metadata_of: StoragePlugin | None) -> Path:
+    """A folder holding a 10-message MCAP recording (m.mcap) and a 6-message SQLite one (s.db3), with the
+    metadata.yaml of the one ``metadata_of`` names (none: no metadata.yaml)."""
+    write_strings(tmp_path / "m", StoragePlugin.MCAP, count=5)
+    write_strings(tmp_path / "s", StoragePlugin.SQLITE3, count=3)
+    folder = tmp_path / "both"
+    folder.mkdir()
+    shutil.copyfile(tmp_path / "m/m.mcap", folder / "m.mcap")
+    shutil.copyfile(tmp_path / "s/s.db3", folder / "s.db3")
+    if metadata_of is not None:
+        source = "m" if metadata_of == StoragePlugin.MCAP else "s"
+        shutil.copyfile(tmp_path / source / "metadata.yaml", folder / "metadata.yaml")
+    return folder
+
+
+@pytest.mark.parametrize(
+    ("plugin", "count", "ignored"),
+    [(StoragePlugin.MCAP, 10, "s.db3"), (StoragePlugin.SQLITE3, 6, "m.mcap")],
+    ids=["metadata-mcap", "metadata-sqlite3"],
+)
+def test_mcap_and_sqlite_in_one_folder_read_the_storage_metadata_names_and_warn(
+    tmp_path: Path, plugin: StoragePlugin, count: int, ignored: str
+) -> None:
+    """As rosbag2 does, metadata.yaml says which files are the recording (the MCAP used to win whatever it
+    said); the other file is ignored, with a warning naming it."""
+    folder = _mcap_and_sqlite(tmp_path, plugin)
+    warnings, messages = _read_all(folder)
+    assert len(messages) == count
+    assert warnings == (
+        f"{ignored} ignored: not part of the {plugin.name.lower()} recording metadata.yaml describes (Fix: move "
+        "it out of the bag folder)",
+    )
+    with open_bag(str(folder)) as reader:
+        assert ignored not in reader.info.files
+
+
+@pytest.mark.parametrize("storage_id", [None, ""], ids=["no-metadata", "metadata-without-storage"])
+def test_mcap_and_sqlite_in_one_folder_without_metadata_naming_one_is_refused(
+    tmp_path: Path, storage_id: str | None
+) -> None:
+    """Which of the two is the recording is unknown: the MCAP used to be read without a word."""
+    folder = _mcap_and_sqlite(tmp_path, None if storage_id is None else StoragePlugin.MCAP)
+    if storage_id is not None:
+        _edit_metadata(folder, storage_identifier=storage_id)
+    with pytest.raises(BagReadError) as caught:
+        open_bag(str(folder)).close()
+    assert caught.value.uri == str(folder)
+    said = "no metadata.yaml says which" if storage_id is None else "its metadata.yaml names neither"
+    assert f"holds both MCAP (m.mcap) and SQLite (s.db3) data files, and {said}" in str(caught.value)
+    assert "Fix: move the files that are not part of this recording out of the folder, or write its " in str(
+        caught.value
+    )

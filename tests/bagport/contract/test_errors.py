@@ -203,3 +203,46 @@ def test_errors_point_into_the_file_on_disk(tmp_path: Path) -> None:
     path.write_text(f"robot_type: r\n\n\nobservations:\n  - {{key: a/b, topic: /a, type: {FLOAT}}}\n")
     with pytest.raises(ContractError, match=rf"^{path}:5 \(observations\[0\]\.key\)"):
         load_contract(str(path))
+
+
+def test_a_key_given_twice_is_refused_at_its_line() -> None:
+    """YAML keeps the last of two equal keys without a word; a contract refuses them."""
+    text = (
+        f"robot_type: r\nfps: 30\nobservations:\n  - key: s\n    topic: /a\n    key: t\n    type: {FLOAT}\n"
+    )
+    with pytest.raises(
+        ContractError, match=r"key 'key' is given twice \(also line 4\).*Fix: keep one 'key:'"
+    ) as caught:
+        parse_contract(text, "robot.yaml")
+    assert (caught.value.file, caught.value.line, caught.value.field) == ("robot.yaml", 6, "observations[0]")
+
+
+@pytest.mark.parametrize(
+    ("section", "entry"),
+    [
+        (
+            "observations",
+            f"  - {{key: observation.state, topic: /a, type: {FLOAT}}}\n  - key: observation.state\n",
+        ),
+        (
+            "rewards",
+            "  - {key: next.reward, topic: /a, type: std_msgs/msg/Float64, dtype: float32}\n  - key: r\n",
+        ),
+    ],
+)
+@pytest.mark.parametrize("dtype", ["int8", "string"])
+def test_a_dtype_a_numeric_feature_cannot_have_lists_those_it_can(
+    section: str, entry: str, dtype: str
+) -> None:
+    """The error names the entry that asks for the dtype (line 5, not the key's first entry) and every
+    dtype allowed."""
+    text = (
+        f"robot_type: r\nfps: 30\n{section}:\n{entry}    topic: /b\n    type: {FLOAT}\n    dtype: {dtype}\n"
+    )
+    with pytest.raises(ContractError) as caught:
+        parse_contract(text, "robot.yaml")
+    key = "observation.state" if section == "observations" else "r"
+    assert (caught.value.file, caught.value.line, caught.value.field) == ("robot.yaml", 5, f"{key}.dtype")
+    assert f"dtype '{dtype}' of key '{key}' is not one a numeric feature can have" in str(caught.value)
+    allowed = "['bool', 'float16', 'float32', 'float64', 'int16', 'int32', 'int64', 'uint8']"
+    assert f"Fix: use one of {allowed}" in str(caught.value)

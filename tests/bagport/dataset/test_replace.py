@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from bagport.dataset.replace import refuse_existing
+from bagport.dataset.replace import refuse_existing, refuse_output_in_a_bag
 from bagport.errors import DatasetWriteError
 
 
@@ -67,3 +67,23 @@ def test_overwrite_sees_a_bag_inside_the_dataset_through_dots_and_links(
     (tmp_path / "link").symlink_to(dataset / "bags")
     with pytest.raises(DatasetWriteError, match="holds the bag"):  # the bag named through a link
         refuse_existing(str(dataset), overwrite=True, inputs=[str(tmp_path / "link/a.mcap")])
+
+
+def test_an_output_in_a_bag_of_the_run_is_refused(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The converse of a dataset holding a bag: a dataset written into a recording's folder."""
+    bag = tmp_path / "bags/ep1"
+    bag.mkdir(parents=True)
+    inputs = [str(tmp_path / "bags/other.mcap"), str(bag)]
+    for output in (bag / "out", bag, bag / "deeper/out"):
+        with pytest.raises(DatasetWriteError, match=rf"--output {output} is inside the bag {bag}:") as caught:
+            refuse_output_in_a_bag(str(output), inputs)
+        assert "nothing was written. Fix: choose an --output outside the bags' folders." in str(caught.value)
+    monkeypatch.chdir(bag)
+    with pytest.raises(DatasetWriteError, match="is inside the bag"):  # --output out, run from the bag
+        refuse_output_in_a_bag("out", inputs)
+    (tmp_path / "link").symlink_to(bag)
+    with pytest.raises(DatasetWriteError, match="is inside the bag"):  # through a link
+        refuse_output_in_a_bag(str(tmp_path / "link/out"), inputs)
+    # beside the bags, or a sibling whose name starts like the bag's, is not inside one
+    refuse_output_in_a_bag(str(tmp_path / "bags/ep1-dataset"), inputs)
+    refuse_output_in_a_bag(str(tmp_path / "datasets/ep1"), inputs)

@@ -125,18 +125,10 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(bag.uri, contract_text, encoder, bag.window.key(), msg_definitions),
-            bag_uri=bag.uri,
-            manifest_entry=bag.entry,
-            staging_uri=staging,
-            contract_text=contract_text,
-            contract_name=config.contract,
-            encoder=encoder,
-            default_task=bag.task,
-            metadata=bag.metadata,
-            qa=qa,
-            window=bag.window,
-            msg_definitions=msg_definitions,
-        )
+            bag_uri=bag.uri, manifest_entry=bag.entry, staging_uri=staging, contract_text=contract_text,
+            contract_name=config.contract, encoder=encoder, default_task=bag.task, metadata=bag.metadata,
+            qa=qa, window=bag.window, msg_definitions=msg_definitions,
+        )  # fmt: skip
         for bag in bags
     )
     plan = RunPlan(

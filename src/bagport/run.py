@@ -122,20 +122,22 @@ def plan_run(config: ConvertConfig, *, reuse: bool = True) -> RunPlan:
     elif not config.append:
         refuse_existing(config.output, overwrite=config.overwrite, inputs=[bag.uri for bag in manifest.bags])
     check_format_outputs(config)
+    # fmt: off
     requests = tuple(
         EpisodeRequest(
             episode_id=episode_id_for(bag.uri, contract_text, encoder, bag.window.key(), msg_definitions),
             bag_uri=bag.uri, manifest_entry=bag.entry, staging_uri=staging, contract_text=contract_text,
             contract_name=config.contract, encoder=encoder, default_task=bag.task, metadata=bag.metadata,
             qa=qa, window=bag.window, msg_definitions=msg_definitions,
-        )  # fmt: skip
+        )
         for bag in bags
     )
     plan = RunPlan(
         config, contract, manifest, requests, contract_text, qa,
         dataset_episodes=dataset_episodes, staging_removed=removed,
         overlaps=window_overlaps(bags, held, whole_bag_split=segments_bags(contract)),
-    )  # fmt: skip
+    )
+    # fmt: on
     plan = _mark_up_to_date(_take_staged(plan, stamp_of), stamp_of) if reuse else plan
     _check_encoder_once(plan, encoder)
     return plan

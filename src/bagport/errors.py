@@ -17,6 +17,7 @@ __all__ = [
     "DecodeError",
     "EncoderSettingsError",
     "ManifestError",
+    "OutputTakenError",
     "PushError",
     "QualityError",
     "TransientError",
@@ -166,6 +167,20 @@ class EncoderSettingsError(VideoError):
 
 class DatasetWriteError(BagportError):
     """Writing the LeRobot dataset failed; the output folder was left untouched."""
+
+
+class OutputTakenError(DatasetWriteError):
+    """A first write (no ``--overwrite``) found, at its commit, an output another run published while it wrote:
+    that output is kept, this run's is not published."""
+
+    def __init__(self, output: str) -> None:
+        self.output = output
+        super().__init__(
+            f"{output} was created by another run while this one was writing it (two runs with one output); "
+            "that run's output is kept and this run's was not published there. Fix: write to a new --output, "
+            "or, for a LeRobot dataset, add this run's bags to it with --append (the episodes this run staged "
+            "are reused); one run at a time per output."
+        )
 
 
 class QualityError(BagportError):

@@ -45,7 +45,7 @@ from fsspec.implementations.local import LocalFileSystem
 from bagport.dataset.crashpoints import reached
 from bagport.dataset.journal import Journal, file_sha256, read_journal, remove_journal, write_journal
 from bagport.dataset.layout import INFO_PATH
-from bagport.errors import DatasetWriteError
+from bagport.errors import DatasetWriteError, OutputTakenError
 
 __all__ = ["building_beside", "commit_append", "exchange", "recover_local", "swap_into_place"]
 
@@ -235,32 +235,25 @@ def _replace(new: Path, current: Path, retired_name: str) -> None:
     retired.rename(new)  # as the exchange would have left it: the caller removes the old one
 
 
-def _taken_meanwhile(final: Path) -> DatasetWriteError:
-    return DatasetWriteError(
-        f"{final} was created by another run while this one was writing (two runs with one --output); that "
-        "run's output is kept and this run's dataset was not published. Fix: add this run's bags to it with "
-        "--append (the episodes staged by this run are reused), or write to a new --output; one run at a time "
-        "per output."
-    )
-
-
 def swap_into_place(build: Path, final: Path, *, overwrite: bool) -> None:
     """Put the dataset built in ``build`` at ``final`` (replacing one there, atomically where the OS can, when
     ``overwrite``); ``build`` then holds the old dataset, if any, for the caller to remove. Without
     ``overwrite`` the output was absent when the write began: one that another run put there since is
-    refused (:class:`DatasetWriteError`), never replaced."""
+    refused (:class:`OutputTakenError`), never replaced."""
     reached("local.publish.built")
     if not final.exists():
         try:
             build.rename(final)
+            reached("local.publish.swapped")
+            return
         except OSError as err:  # created between the check and the rename: a directory not empty
-            if err.errno not in (errno.ENOTEMPTY, errno.EEXIST) or overwrite:
+            if err.errno not in (errno.ENOTEMPTY, errno.EEXIST):
                 raise
-            raise _taken_meanwhile(final) from err
-    elif overwrite:
-        _replace(build, final, f".{final.name}.old-{uuid.uuid4().hex[:8]}")
-    else:
-        raise _taken_meanwhile(final)
+            if not overwrite:
+                raise OutputTakenError(str(final)) from err
+    elif not overwrite:
+        raise OutputTakenError(str(final))
+    _replace(build, final, f".{final.name}.old-{uuid.uuid4().hex[:8]}")
     reached("local.publish.swapped")
 
 

@@ -35,7 +35,7 @@ from fsspec.core import url_to_fs
 from bagport.dataset.crashpoints import reached
 from bagport.dataset.journal import Journal, file_sha256, read_journal, remove_journal, write_journal
 from bagport.dataset.layout import INFO_PATH, STAGED_DIR
-from bagport.errors import DatasetWriteError
+from bagport.errors import DatasetWriteError, OutputTakenError
 
 __all__ = ["drop_staged", "publish_remote", "publish_staged", "recover_remote"]
 
@@ -113,12 +113,7 @@ def refuse_taken(fs: AbstractFileSystem, output: str, root: str, *, overwrite: b
     commit one step, so two runs racing to the last moment are not caught; one run per output)."""
     if overwrite or not fs.exists(f"{root}/{INFO_PATH}"):
         return
-    raise DatasetWriteError(
-        f"{output} was created by another run while this one was writing (two runs with one --output); that "
-        "run's output is kept and this run's dataset was not published. Fix: add this run's bags to it with "
-        "--append (the episodes staged by this run are reused), or write to a new --output; one run at a time "
-        "per output."
-    )
+    raise OutputTakenError(output)
 
 
 def publish_remote(
@@ -213,9 +208,26 @@ def publish_staged(
             reached("s3.staging")
     write_journal(fs, root, journal)
     reached("s3.staged")
+    _check_staged_whole(fs, output, root, journal)
     write_journal(fs, root, journal.committing())
     reached("s3.committing")
     _roll_forward(fs, root, journal)
+
+
+def _check_staged_whole(fs: AbstractFileSystem, output: str, root: str, journal: Journal) -> None:
+    """Before the commit point: every file the record names is under its staged prefix. An object store has
+    no locks, so another run's recovery can take a live write's uploads for a dead run's and drop them; the
+    commit would then publish a ``meta/`` whose data or video files do not exist."""
+    fs.invalidate_cache()
+    prefix = f"{root}/{journal.staged}/"
+    present = {path[len(prefix) :] for path in fs.find(prefix)}
+    missing = [rel for rel in journal.files if rel not in present]
+    if missing:
+        raise DatasetWriteError(
+            f"{len(missing)} of the {len(journal.files)} files this run uploaded under {prefix} are gone (first: "
+            f"{missing[0]}): another run with the same output took this write for a dead one and dropped it; "
+            f"nothing was published and {output} is as it was. Fix: run again, one run at a time per output."
+        )
 
 
 def _upload(fs: AbstractFileSystem, local: Path, remote: str) -> None:

@@ -16,7 +16,7 @@ from bagport.dataset.crashpoints import set_hook
 from bagport.dataset.publish import exchange
 from bagport.dataset.repair import repair_dataset
 from bagport.dataset.validate import validate_dataset
-from bagport.errors import DatasetWriteError
+from bagport.errors import DatasetWriteError, OutputTakenError
 from bagport.staging import EpisodeSummary
 
 
@@ -172,26 +172,30 @@ def test_a_first_write_never_replaces_a_dataset_another_run_published_meanwhile(
     set_hook(another_run_publishes)
     try:
         with pytest.raises(
-            DatasetWriteError, match="created by another run while this one was writing"
+            OutputTakenError, match="created by another run while this one was writing"
         ) as err:
             write_dataset(staged, str(out), robot_type="r")
     finally:
         set_hook(None)
-    assert "--append" in str(err.value)
+    assert "--append" in str(err.value) and err.value.output == str(out)
     assert _files(out) == published
     assert sorted(p.name for p in tmp_path.iterdir()) == ["ds"]  # this run's build folder removed
     assert validate_dataset(out, decode_every=1000).episodes == 1
 
 
+@pytest.mark.parametrize(
+    "step", ["local.publish.files", "local.publish.built"], ids=["while-building", "at-rename"]
+)
 def test_an_overwrite_replaces_a_dataset_published_meanwhile_as_it_was_asked_to(
-    staged: list[EpisodeSummary], tmp_path: Path
+    staged: list[EpisodeSummary], tmp_path: Path, step: str
 ) -> None:
+    """Also when the other dataset lands between the check and the rename (a raw ENOTEMPTY before)."""
     out = tmp_path / "ds"
     other = tmp_path / "other"
     write_dataset(staged[:1], str(other), robot_type="r")
 
     def another_run_publishes(reached_step: str) -> None:
-        if reached_step == "local.publish.files" and not out.exists():
+        if reached_step == step and not out.exists():
             other.rename(out)
 
     set_hook(another_run_publishes)

@@ -14,7 +14,7 @@ from bagport.config import ConvertConfig
 from bagport.dataset.crashpoints import set_hook
 from bagport.dataset.remote import recover_remote
 from bagport.dataset.validate import validate_dataset
-from bagport.errors import DatasetWriteError
+from bagport.errors import DatasetWriteError, OutputTakenError
 from bagport.reduce import reduce_run
 from bagport.run import plan_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
@@ -192,8 +192,37 @@ def test_a_first_write_on_s3_never_replaces_a_dataset_another_run_published_mean
 
     set_hook(another_run_publishes)
     try:
-        with pytest.raises(DatasetWriteError, match="created by another run while this one was writing"):
+        with pytest.raises(OutputTakenError, match="created by another run while this one was writing"):
             reduce_run(plan, staged)
     finally:
         set_hook(None)
     assert sorted(_etags(s3, "fleet/raced")) == ["meta/info.json"]
+
+
+def test_a_commit_on_s3_whose_uploads_another_run_dropped_publishes_nothing(
+    bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path
+) -> None:
+    """Without locks, a second run's recovery can drop a live write's staged uploads (two runs with one
+    output): the commit checks its files are all there before its commit point, instead of publishing a
+    meta/ whose data files do not exist."""
+    (bags / "manifest-dropped.yaml").write_text("bags:\n  - uri: a\n")
+    config = ConvertConfig(
+        manifest=str(bags / "manifest-dropped.yaml"), contract=str(SAMPLE_CONTRACT), output="s3://fleet/dropped",
+        encoder=FAST_CODEC, staging=str(tmp_path / "staging"),
+    )  # fmt: skip
+    plan = plan_run(config)
+    staged = stage_all(plan)
+
+    def another_run_drops_a_file(step: str) -> None:
+        if step == "s3.staged":
+            s3.invalidate_cache()
+            (data,) = [p for p in s3.find("fleet/dropped") if "/data/" in p]
+            s3.rm(data)
+
+    set_hook(another_run_drops_a_file)
+    try:
+        with pytest.raises(DatasetWriteError, match=r"1 of the \d+ files this run uploaded .* are gone"):
+            reduce_run(plan, staged)
+    finally:
+        set_hook(None)
+    assert _etags(s3, "fleet/dropped") == {}  # nothing published, its uploads and record dropped

@@ -27,7 +27,7 @@ from bagport.run import RunPlan, failure_key, up_to_date, write_key
 from bagport.segment import kept_segmentation
 from bagport.selection import EpisodeFailure, select_episodes
 from bagport.staging import EpisodeSummary, StagedFeature, read_summary
-from bagport.uris import is_local
+from bagport.uris import BUCKET_STORES, is_local, protocol_of
 from bagport.video import EncoderSettings
 
 __all__ = [
@@ -266,6 +266,10 @@ def _remove_staged(plan: RunPlan, staged_dirs: Sequence[str]) -> None:
             fs.rm(staged_path, recursive=True)
     if is_local(fs):
         _remove_empty_folders(Path(path))
+    elif protocol_of(fs) not in BUCKET_STORES:  # folders of its own (sftp, memory): removed when empty
+        with contextlib.suppress(OSError):
+            if fs.exists(path) and not fs.find(path):
+                fs.rm(path, recursive=True)
 
 
 def _remove_empty_folders(root: Path) -> None:

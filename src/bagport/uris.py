@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -62,6 +63,13 @@ def read_text_file(
     except UnicodeDecodeError as err:
         raise error(
             f"{subject} is not UTF-8 text (the byte at offset {err.start} is not)", file=uri, fix=UTF8_FIX
+        ) from err
+    except (ValueError, ImportError) as err:  # (UnicodeDecodeError is a ValueError: caught above)
+        raise error(
+            f"{subject} cannot be opened: fsspec does not know its protocol ({err})",
+            file=uri,
+            fix="give a local path, or a URI fsspec knows (s3://, gs://, ...) with its package installed "
+            "(s3fs, gcsfs, ...).",
         ) from err
     except OSError as err:
         raise error(f"{subject} cannot be read ({err.strerror or err})", file=uri, fix=fix) from err
@@ -132,13 +140,15 @@ def _check_local_folder(path: Path, uri: str, what: str) -> None:
     if folder is None:
         return
     try:
-        Path(tempfile.mkdtemp(prefix=".bagport-write-check-", dir=folder)).rmdir()
+        made = Path(tempfile.mkdtemp(prefix=".bagport-write-check-", dir=folder))
     except OSError as err:
         raise DatasetWriteError(
             f"{what} {uri}: nothing can be written in {folder} ({err.strerror or err}); nothing was converted "
             "or written. Fix: give a folder this user can write (check its owner and permissions, the free "
             "space, and whether it is mounted read-only)."
         ) from err
+    with contextlib.suppress(FileNotFoundError):  # another run emptying a shared staging store took it
+        made.rmdir()
 
 
 def require_bucket(fs: AbstractFileSystem, path: str, uri: str) -> None:

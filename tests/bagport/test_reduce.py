@@ -102,3 +102,23 @@ def test_a_run_sharing_its_staging_store_never_removes_an_episode_another_run_st
     assert not aside.exists() and (staged_b / "episode.json").is_file()
     assert reduce_run(other, early).episodes == 1  # run b writes its episode from the staging store
     assert request.bag_uri.endswith("/b") and not (tmp_path / "staging").exists()
+
+
+def test_a_staging_store_with_folders_of_its_own_is_removed_when_emptied(tmp_path: Path) -> None:
+    """Not local and not an object store (fsspec's memory store, like sftp): its empty folders are removed
+    as before, the store with them."""
+    import fsspec  # noqa: PLC0415
+
+    write_episode_bag(tmp_path / "bags" / "a", "mcap", EpisodeSpec(duration_s=0.5, cameras=SMALL_CAMERAS))
+    contract = tmp_path / "contract.yaml"
+    contract.write_text(SAMPLE_CONTRACT.read_text())
+    config = ConvertConfig(
+        bags_glob=str(tmp_path / "bags" / "*"), contract=str(contract), output=str(tmp_path / "out"),
+        staging="memory://bagport-test-staging", encoder=FAST_CODEC,
+    )  # fmt: skip
+    plan = plan_run(config)
+    staged = stage_all(plan)
+    memory = fsspec.filesystem("memory")
+    memory.mkdir("/bagport-test-staging/segments")  # an empty folder of the store's own
+    reduce_run(plan, staged)
+    assert not memory.exists("/bagport-test-staging")

@@ -10,7 +10,8 @@ import pytest
 from s3fs import S3FileSystem
 
 from bagport.config import ConvertConfig
-from bagport.errors import ContractError, DatasetWriteError
+from bagport.errors import ContractError, DatasetWriteError, ManifestError
+from bagport.manifest import load_manifest
 from bagport.run import plan_run
 from bagport.uris import check_writable, output_fs, read_text
 from flows.cli import main
@@ -136,3 +137,13 @@ def test_a_local_output_or_staging_nobody_can_write_is_refused_before_converting
         )  # itself only
     finally:
         locked.chmod(0o700)
+
+
+def test_a_contract_or_manifest_on_a_protocol_fsspec_does_not_know_is_one_paragraph(tmp_path: Path) -> None:
+    """Reviewed: `--contract foo://c.yaml` and `--manifest gs://b/m.yaml` (gcsfs not installed) were tracebacks."""
+    with pytest.raises(
+        ContractError, match=r"foo://c.yaml: contract file cannot be opened: fsspec does not know"
+    ):
+        read_text("foo://c.yaml", "contract")
+    with pytest.raises(ManifestError, match=r"nope://m.yaml: file cannot be opened: fsspec does not know"):
+        load_manifest("nope://m.yaml")

@@ -77,7 +77,7 @@ def _type_problem(info: Any) -> str | None:
     names, whole numbers for counts and times), or ``None``: an edited or damaged file, said before a reader
     fails on it with a bare ``TypeError``."""
     if not isinstance(info, dict):
-        return f"rosbag2_bagfile_information is a {type(info).__name__}, not a mapping"
+        return f"rosbag2_bagfile_information is {_kind(info)}, not a mapping"
     files = info.get("relative_file_paths")
     if files is not None and not (isinstance(files, list) and all(isinstance(f, str) for f in files)):
         return f"relative_file_paths is {files!r}, not a list of file names"
@@ -98,6 +98,12 @@ def _type_problem(info: Any) -> str | None:
     return None
 
 
+def _kind(value: Any) -> str:
+    """What a parsed YAML value is, in words ("a list", "a number")."""
+    kinds = {bool: "true or false", list: "a list", str: "a string", int: "a number", float: "a number"}
+    return next((text for kind, text in kinds.items() if isinstance(value, kind)), type(value).__name__)
+
+
 def read_metadata(folder: Path | RemotePath, uri: str) -> dict[str, Any] | None:
     """The ``rosbag2_bagfile_information`` of ``folder``'s ``metadata.yaml`` (``{}`` when it has none), or
     ``None`` when the folder has no ``metadata.yaml``. A file that is not UTF-8 text, cannot be read or parsed,
@@ -106,13 +112,17 @@ def read_metadata(folder: Path | RemotePath, uri: str) -> dict[str, Any] | None:
     if not metadata.is_file():
         return None
     try:
-        info = (parse_metadata(metadata.read_text()) or {}).get("rosbag2_bagfile_information") or {}
+        document = parse_metadata(metadata.read_text()) or {}
     except UnicodeDecodeError as err:
         raise BagReadError(
             f"metadata.yaml is not text (a byte at offset {err.start} is not UTF-8)", uri=uri, fix=_FIX
         ) from err
     except (yaml.YAMLError, OSError, AttributeError, TypeError, ValueError) as err:
         raise BagReadError(f"metadata.yaml is unreadable ({err})", uri=uri, fix=_FIX) from err
+    if not isinstance(document, dict):
+        what = f"holds {_kind(document)}, not a mapping with rosbag2_bagfile_information"
+        raise BagReadError(f"metadata.yaml is damaged or edited: it {what}", uri=uri, fix=_FIX)
+    info = document.get("rosbag2_bagfile_information") or {}
     problem = _type_problem(info)
     if problem is not None:
         raise BagReadError(f"metadata.yaml is damaged or edited: {problem}", uri=uri, fix=_FIX)

@@ -21,6 +21,7 @@ import functools
 from collections.abc import Callable, Collection, Iterable, Mapping
 from typing import Any
 
+from fsspec import AbstractFileSystem
 from fsspec.core import url_to_fs
 from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typestore
@@ -78,25 +79,34 @@ def read_msg_path(uri: str) -> dict[str, str]:
     found: dict[str, str] = {}
     for path in files:
         relative = path[len(root.rstrip("/")) + 1 :]
+        file_uri = f"{uri.rstrip('/')}/{relative}"
         name = _type_name(relative)
         if name is None:
             raise BagReadError(
                 "is not inside a package folder",
-                uri=f"{uri.rstrip('/')}/{relative}",
+                uri=file_uri,
                 fix="move it to <package>/msg/<Type>.msg under the --msg-path folder.",
             )
+        found[name] = _msg_text(fs, path, file_uri)
+        parse_msg_definitions({name: found[name]}, source=file_uri)
+    return found
+
+
+def _msg_text(fs: AbstractFileSystem, path: str, file_uri: str) -> str:
+    """One ``.msg`` file's text; one that cannot be read or is not UTF-8 is a :class:`BagReadError`."""
+    try:
         with fs.open(path, "rb") as handle:
             data = handle.read()
-        try:
-            found[name] = data.decode("utf-8")
-        except UnicodeDecodeError as err:
-            raise BagReadError(
-                f"is not UTF-8 text (the byte at offset {err.start} is not)",
-                uri=f"{uri.rstrip('/')}/{relative}",
-                fix=UTF8_FIX,
-            ) from err
-    parse_msg_definitions(found)
-    return found
+    except OSError as err:
+        raise BagReadError(
+            f"cannot be read ({err.strerror or err})", uri=file_uri, fix="check the file's permissions."
+        ) from err
+    try:
+        return str(data.decode("utf-8"))
+    except UnicodeDecodeError as err:
+        raise BagReadError(
+            f"is not UTF-8 text (the byte at offset {err.start} is not)", uri=file_uri, fix=UTF8_FIX
+        ) from err
 
 
 def parse_msg_definitions(definitions: Mapping[str, str], source: str = "--msg-path") -> Typesdict:
@@ -109,7 +119,7 @@ def parse_msg_definitions(definitions: Mapping[str, str], source: str = "--msg-p
             raise BagReadError(
                 f"the definition of {name} cannot be parsed ({one_line(err)})",
                 uri=source,
-                fix=f"fix the file {name}.msg (ROS 2 .msg syntax).",
+                fix=f"correct the .msg text of {name} (ROS 2 .msg syntax).",
             ) from err
     return typs
 

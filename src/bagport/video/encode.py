@@ -57,29 +57,12 @@ class StreamingEncoder:
         except (av.error.FFmpegError, OSError) as err:
             raise VideoError(f"{path}: cannot create the clip ({err})") from err
         try:
-            stream: Any = self._container.add_stream(
-                settings.codec, rate=fps, options=_quiet(settings.codec_options())
+            stream = _video_stream(
+                self._container, path, fps=fps, width=width, height=height, settings=settings
             )
-        except (av.error.FFmpegError, ValueError) as err:
+        except BaseException:
             self._container.close()
-            raise EncoderSettingsError(
-                f"{path}: cannot start encoder {settings.codec!r} ({err}). Fix: pick a codec this PyAV build has "
-                "(libsvtav1, libx264) in the codec preset.",
-                codec=settings.codec,
-                detail=f"no encoder {settings.codec!r} in this PyAV build (libsvtav1 and libx264 are)",
-            ) from err
-        stream.width = width
-        stream.height = height
-        try:
-            stream.pix_fmt = settings.pix_fmt
-        except ValueError as err:
-            self._container.close()
-            raise EncoderSettingsError(
-                f"{path}: {err}. Fix: set pix_fmt to one {settings.codec} takes (yuv420p) in the codec preset.",
-                codec=settings.codec,
-                detail=f"pix_fmt {settings.pix_fmt!r} is not a pixel format FFmpeg knows",
-            ) from err
-        stream.time_base = Fraction(1, fps)
+            raise
         self._stream: Any = stream
         self._frames = 0
         self._closed: ClipInfo | None = None
@@ -188,6 +171,39 @@ def _stream_codec_name(path: Path, encoder: str) -> str:
     finally:
         container.close()
     return name
+
+
+def _video_stream(
+    container: Any, path: str | Path, *, fps: int, width: int, height: int, settings: EncoderSettings
+) -> Any:
+    """The clip's video stream in ``container``; settings that cannot make one raise :class:`EncoderSettingsError`."""
+    try:
+        stream: Any = container.add_stream(settings.codec, rate=fps, options=_quiet(settings.codec_options()))
+    except (av.error.FFmpegError, ValueError) as err:
+        raise EncoderSettingsError(
+            f"{path}: cannot start encoder {settings.codec!r} ({err}). Fix: pick a codec this PyAV build has "
+            "(libsvtav1, libx264) in the codec preset.",
+            codec=settings.codec,
+            detail=f"no encoder {settings.codec!r} in this PyAV build (libsvtav1 and libx264 are)",
+        ) from err
+    if stream.type != "video":
+        raise EncoderSettingsError(
+            f"{path}: {settings.codec!r} is an encoder of {stream.type}, not video. Fix: pick a video codec "
+            "(libsvtav1, libx264) in the codec preset.",
+            codec=settings.codec,
+            detail=f"{settings.codec!r} encodes {stream.type}, not video",
+        )
+    stream.width, stream.height = width, height
+    try:
+        stream.pix_fmt = settings.pix_fmt
+    except ValueError as err:
+        raise EncoderSettingsError(
+            f"{path}: {err}. Fix: set pix_fmt to one {settings.codec} takes (yuv420p) in the codec preset.",
+            codec=settings.codec,
+            detail=f"pix_fmt {settings.pix_fmt!r} is not a pixel format FFmpeg knows",
+        ) from err
+    stream.time_base = Fraction(1, fps)
+    return stream
 
 
 def _settings_text(settings: EncoderSettings) -> str:

@@ -42,7 +42,7 @@ _KINDS: dict[str, tuple[str, tuple[type, ...], bool]] = {
     "codec": ("an encoder name (libx264, libsvtav1)", (str,), False),
     "pix_fmt": ("a pixel format name (yuv420p)", (str,), False),
     "g": ("a whole number of frames", (int,), True),
-    "crf": ("a whole number", (int,), True),
+    "crf": ("a number", (int, float), True),
     "preset": ("a number or a name", (int, str), True),
     "fast_decode": ("a whole number (0-2)", (int,), False),
     "threads": ("a whole number", (int,), True),
@@ -70,7 +70,7 @@ class EncoderSettings:
     codec: str = _SVTAV1
     pix_fmt: str = "yuv420p"
     g: int | None = 2
-    crf: int | None = 30
+    crf: float | None = 30
     preset: int | str | None = 12
     fast_decode: int = 0
     threads: int | None = None

@@ -73,8 +73,12 @@ BAD_METADATA = pytest.mark.parametrize(
             lambda text: re.sub(r"(?m)^  message_count: \d+", "  message_count: abc", text).encode(),
             "metadata.yaml is damaged or edited: message_count is 'abc', not a whole number",
         ),
+        (
+            lambda text: b"- " + text.encode().replace(b"\n", b"\n  "),
+            "metadata.yaml is damaged or edited: it holds a list, not a mapping with rosbag2_bagfile_information",
+        ),
     ],
-    ids=["not-text", "not-yaml", "files-not-a-list", "count-not-a-number"],
+    ids=["not-text", "not-yaml", "files-not-a-list", "count-not-a-number", "a-list"],
 )
 
 

@@ -252,8 +252,9 @@ def test_msg_path_errors(tmp_path: Path) -> None:
     bad = tmp_path / "acme_msgs" / "msg"
     bad.mkdir(parents=True)
     (bad / "Broken.msg").write_text("int32[ x\n")
-    with pytest.raises(BagReadError, match=r"definition of acme_msgs/msg/Broken cannot be parsed"):
+    with pytest.raises(BagReadError, match=r"definition of acme_msgs/msg/Broken cannot be parsed") as err:
         read_msg_path(str(tmp_path))  # parsed when read: once at the plan, not once per bag
+    assert err.value.uri == f"{tmp_path}/acme_msgs/msg/Broken.msg"  # the file, not "--msg-path"
     with pytest.raises(BagReadError, match=r"definition of acme_msgs/msg/Broken cannot be parsed"):
         parse_msg_definitions({"acme_msgs/msg/Broken": "int32[ x\n"})
     (bad / "Broken.msg").write_bytes(b"int32 x # caf\xe9\n")

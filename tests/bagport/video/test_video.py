@@ -130,13 +130,14 @@ def test_bagport_default_encoder_is_the_h264_fast_preset() -> None:
 
 @pytest.mark.parametrize(
     ("setting", "value", "kind"),
-    [("crf", "high", "a whole number"), ("g", 2.5, "a whole number of frames"), ("preset", True, "a number or a name"),
+    [("crf", "high", "a number"), ("g", 2.5, "a whole number of frames"), ("preset", True, "a number or a name"),
      ("codec", 264, "an encoder name"), ("extra_options", ["tune"], "a mapping")],
 )  # fmt: skip
 def test_a_setting_of_the_wrong_kind_is_refused_by_name(setting: str, value: object, kind: str) -> None:
     with pytest.raises(VideoError, match=rf"encoder setting {setting}: .* is not {kind}.*Fix: correct it"):
         EncoderSettings.from_dict({setting: value})
     assert EncoderSettings.from_dict({"crf": None, "preset": "veryfast", "codec": "libx264"}).crf is None
+    assert EncoderSettings.from_dict({"crf": 23.5, "codec": "libx264"}).codec_options()["crf"] == "23.5"
 
 
 @pytest.mark.parametrize("preset", sorted((REPO / "configs" / "codecs").glob("*.yaml")), ids=lambda p: p.stem)
@@ -151,8 +152,9 @@ def test_every_shipped_codec_preset_passes_the_encoder_check(preset: Path, tmp_p
         ({"codec": "libx264", "extra_options": {"profile": "bogus"}}, "Invalid argument when libx264 opened"),
         ({"codec": "libx264", "pix_fmt": "yuv9000"}, "pix_fmt 'yuv9000' is not a pixel format FFmpeg knows"),
         ({"codec": "nope"}, "no encoder 'nope' in this PyAV build"),
+        ({"codec": "aac"}, "'aac' encodes audio, not video"),
     ],
-    ids=["option-out-of-range", "option-refused", "unknown-pix-fmt", "unknown-codec"],
+    ids=["option-out-of-range", "option-refused", "unknown-pix-fmt", "unknown-codec", "audio-codec"],
 )
 def test_settings_the_encoder_refuses_are_found_before_any_episode(
     settings: dict[str, object], detail: str, tmp_path: Path

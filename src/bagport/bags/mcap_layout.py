@@ -99,14 +99,9 @@ def summary_damage(path: Path | RemotePath) -> LayoutDamage | None:
     ``None`` for a whole summary, or a file that is not whole MCAP (cut short: :mod:`.mcap_tail` says so).
     Reads only the summary: cheap enough at every open."""
     size = path.stat().st_size
-    if size < len(MAGIC) + _TAIL:
-        return None
     with path.open("rb") as handle:
-        handle.seek(size - len(MAGIC))
-        if handle.read(len(MAGIC)) != MAGIC:
-            return None
-        found = _footer(handle, size)
-        if isinstance(found, LayoutDamage):
+        found = _whole_footer(handle, size)
+        if found is None or isinstance(found, LayoutDamage):
             return found
         at, summary_at, crc = found
         if not summary_at:
@@ -141,16 +136,22 @@ def mcap_layout_damage(path: Path | RemotePath) -> LayoutDamage | None:
     if damage is not None or isinstance(path, RemotePath):
         return damage
     size = path.stat().st_size
-    if size < len(MAGIC) + _TAIL:
-        return None
     with path.open("rb") as handle:
-        handle.seek(size - len(MAGIC))
-        if handle.read(len(MAGIC)) != MAGIC:
-            return None
-        found = _footer(handle, size)
-        if isinstance(found, LayoutDamage):
+        found = _whole_footer(handle, size)
+        if found is None or isinstance(found, LayoutDamage):
             return found
         return _data_damage(handle, found[1] or found[0], size)
+
+
+def _whole_footer(handle: IO[bytes], size: int) -> LayoutDamage | tuple[int, int, int] | None:
+    """:func:`_footer` of a file that ends as MCAP does; ``None`` for one too short or without the closing
+    magic (cut short: :mod:`.mcap_tail` says so)."""
+    if size < len(MAGIC) + _TAIL:
+        return None
+    handle.seek(size - len(MAGIC))
+    if handle.read(len(MAGIC)) != MAGIC:
+        return None
+    return _footer(handle, size)
 
 
 def _summary_records(buf: bytes, start: int) -> LayoutDamage | None:

@@ -16,7 +16,7 @@ from bagport.dataset.remote import recover_remote
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import DatasetWriteError, OutputTakenError
 from bagport.reduce import reduce_run
-from bagport.run import plan_run, stage_all
+from bagport.run import PlannedEpisode, RunPlan, plan_run, stage_all
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from tests.helpers import FAST_CODEC, SAMPLE_CONTRACT
 from tests.s3 import s3_bucket
@@ -173,18 +173,23 @@ def test_a_crashed_publish_of_an_older_bagport_is_rolled_back(
     assert _etags(s3, "fleet/legacy") == previous
 
 
+def _first_write_staged(bags: Path, name: str, staging: Path) -> tuple[RunPlan, list[PlannedEpisode]]:
+    """A first write of bag ``a`` to ``s3://fleet/<name>``, planned and staged (not reduced)."""
+    (bags / f"manifest-{name}.yaml").write_text("bags:\n  - uri: a\n")
+    config = ConvertConfig(
+        manifest=str(bags / f"manifest-{name}.yaml"), contract=str(SAMPLE_CONTRACT), output=f"s3://fleet/{name}",
+        encoder=FAST_CODEC, staging=str(staging),
+    )  # fmt: skip
+    plan = plan_run(config)
+    return plan, stage_all(plan)
+
+
 def test_a_first_write_on_s3_never_replaces_a_dataset_another_run_published_meanwhile(
     bags: Path, s3: s3fs.S3FileSystem, tmp_path: Path
 ) -> None:
     """Without --overwrite, a dataset that appeared at the output while this run wrote (another run with the
     same --output) is refused at the commit: its objects stay as they are and this run's uploads go."""
-    (bags / "manifest-raced.yaml").write_text("bags:\n  - uri: a\n")
-    config = ConvertConfig(
-        manifest=str(bags / "manifest-raced.yaml"), contract=str(SAMPLE_CONTRACT), output="s3://fleet/raced",
-        encoder=FAST_CODEC, staging=str(tmp_path / "staging"),
-    )  # fmt: skip
-    plan = plan_run(config)
-    staged = stage_all(plan)
+    plan, staged = _first_write_staged(bags, "raced", tmp_path / "staging")
 
     def another_run_publishes(step: str) -> None:
         if step == "s3.files":
@@ -205,13 +210,7 @@ def test_a_commit_on_s3_whose_uploads_another_run_dropped_publishes_nothing(
     """Without locks, a second run's recovery can drop a live write's staged uploads (two runs with one
     output): the commit checks its files are all there before its commit point, instead of publishing a
     meta/ whose data files do not exist."""
-    (bags / "manifest-dropped.yaml").write_text("bags:\n  - uri: a\n")
-    config = ConvertConfig(
-        manifest=str(bags / "manifest-dropped.yaml"), contract=str(SAMPLE_CONTRACT), output="s3://fleet/dropped",
-        encoder=FAST_CODEC, staging=str(tmp_path / "staging"),
-    )  # fmt: skip
-    plan = plan_run(config)
-    staged = stage_all(plan)
+    plan, staged = _first_write_staged(bags, "dropped", tmp_path / "staging")
 
     def another_run_drops_a_file(step: str) -> None:
         if step == "s3.staged":

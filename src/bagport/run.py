@@ -159,7 +159,9 @@ def _ready_output(config: ConvertConfig, manifest: Manifest) -> tuple[AbstractFi
     staging = config.resolved_staging()
     staging_fs, staging_path = output_fs(staging, "--staging")
     require_bucket(staging_fs, staging_path, staging)
-    refuse_output_in_a_bag(config.output, [bag.uri for bag in manifest.bags])  # before anything writes there
+    bags = [bag.uri for bag in manifest.bags]
+    refuse_output_in_a_bag(config.output, bags)  # before anything writes there
+    refuse_output_in_a_bag(staging, bags, "--staging")
     check_writable(fs, out_path, config.output, "--output", beside=True)
     check_writable(staging_fs, staging_path, staging, "--staging")
     repair_dataset(config.output, clean_scratch=True)  # before reading what an --append adds to

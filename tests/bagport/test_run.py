@@ -276,6 +276,15 @@ def test_an_output_inside_a_bag_folder_is_refused_before_anything_is_written(
     ):
         plan_run(config)
     assert sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*")) == before
+    # a --staging inside the bag: the staged episodes would go into the recording
+    staged_in_bag = config.model_copy(
+        update={"output": str(tmp_path / "out"), "staging": str(fleet / "c/st")}
+    )
+    with pytest.raises(
+        DatasetWriteError, match=r"--staging .*/c/st is inside the bag .*/c: the staged episodes"
+    ):
+        plan_run(staged_in_bag)
+    assert sorted(p.relative_to(fleet).as_posix() for p in fleet.rglob("*")) == before
 
 
 def _convert_all(

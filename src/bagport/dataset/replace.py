@@ -54,18 +54,20 @@ def refuse_existing(output: str, *, overwrite: bool, inputs: Sequence[str] = ())
             )
 
 
-def refuse_output_in_a_bag(output: str, inputs: Sequence[str]) -> None:
+def refuse_output_in_a_bag(output: str, inputs: Sequence[str], what: str = "--output") -> None:
     """The converse of :func:`refuse_existing`'s check: an ``output`` that is, or is inside, one of the run's
-    ``inputs`` (a rosbag2 folder) would put the dataset (and its temporary folders) into a recording."""
+    ``inputs`` (a rosbag2 folder) would put the dataset (and its temporary folders) into a recording; so
+    would a staging store there (``what``: ``--staging``) put the staged episodes."""
     fs, out_path = url_to_fs(output)
     out_real = _real(fs, out_path).rstrip("/")
     for uri in inputs:
         bag_fs, bag_path = url_to_fs(uri)
         bag_real = _real(bag_fs, bag_path).rstrip("/")
         if bag_fs.protocol == fs.protocol and (out_real == bag_real or out_real.startswith(bag_real + "/")):
+            written = "the staged episodes" if what == "--staging" else "the dataset"
             raise DatasetWriteError(
-                f"--output {output} is inside the bag {uri}: the dataset would be written into a recording of "
-                "the run; nothing was written. Fix: choose an --output outside the bags' folders."
+                f"{what} {output} is inside the bag {uri}: {written} would be written into a recording of "
+                f"the run; nothing was written. Fix: choose a {what} outside the bags' folders."
             )
 
 

@@ -77,7 +77,7 @@ def test_an_output_in_a_bag_of_the_run_is_refused(tmp_path: Path, monkeypatch: p
     for output in (bag / "out", bag, bag / "deeper/out"):
         with pytest.raises(DatasetWriteError, match=rf"--output {output} is inside the bag {bag}:") as caught:
             refuse_output_in_a_bag(str(output), inputs)
-        assert "nothing was written. Fix: choose an --output outside the bags' folders." in str(caught.value)
+        assert "nothing was written. Fix: choose a --output outside the bags' folders." in str(caught.value)
     monkeypatch.chdir(bag)
     with pytest.raises(DatasetWriteError, match="is inside the bag"):  # --output out, run from the bag
         refuse_output_in_a_bag("out", inputs)
@@ -87,3 +87,7 @@ def test_an_output_in_a_bag_of_the_run_is_refused(tmp_path: Path, monkeypatch: p
     # beside the bags, or a sibling whose name starts like the bag's, is not inside one
     refuse_output_in_a_bag(str(tmp_path / "bags/ep1-dataset"), inputs)
     refuse_output_in_a_bag(str(tmp_path / "datasets/ep1"), inputs)
+    with pytest.raises(
+        DatasetWriteError, match=rf"--staging {bag}/st is inside the bag {bag}: the staged episodes"
+    ):
+        refuse_output_in_a_bag(str(bag / "st"), inputs, "--staging")

@@ -9,7 +9,7 @@ import struct
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Any, Protocol
+from typing import Any
 
 from backports import zstd
 from fsspec.core import url_to_fs
@@ -22,6 +22,7 @@ from bagport.bags.damage import STORAGE_ERRORS, checked_records, damaged_bag, sh
 from bagport.bags.detect import detect_storage
 from bagport.bags.download import download_bag
 from bagport.bags.indexcount import index_time_range, window_counts
+from bagport.bags.interface import BagReader
 from bagport.bags.layout import BagPath, ReadPlan, plan_reads
 from bagport.bags.mcap_layout import check_summaries
 from bagport.bags.message import BagMessage, HeaderLayout
@@ -49,35 +50,6 @@ _STAMP_FIRST = frozenset({RosType.COMPRESSED_VIDEO.value})
 """Types without a Header whose first field is the capture time (foxglove's ``timestamp``)."""
 RANGED_STORAGES = frozenset({Storage.MCAP})
 """Read in place on remote stores (summary + chunk index); other formats are downloaded first."""
-
-
-class BagReader(Protocol):
-    @property
-    def info(self) -> BagInfo: ...
-
-    @property
-    def transfer(self) -> TransferStats: ...
-
-    def messages(
-        self, topics: Sequence[str] | None = None, *, start_ns: int | None = None, stop_ns: int | None = None
-    ) -> Iterator[BagMessage]:
-        """Messages in log-time order; only those logged in ``[start_ns, stop_ns)`` when given."""
-        ...
-
-    def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]: ...
-
-    def close(self) -> None: ...
-
-    @property
-    def undefined_types(self) -> dict[str, str]:
-        """``{topic: msgtype}`` of topics whose type no source defines (reading them fails)."""
-        ...
-
-    def __enter__(self) -> BagReader: ...
-
-    def __exit__(
-        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
-    ) -> None: ...
 
 
 def _custom_data(path: BagPath, uri: str) -> dict[str, str]:

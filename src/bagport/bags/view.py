@@ -6,9 +6,9 @@ from collections.abc import Iterator, Sequence
 from types import TracebackType
 from typing import Self
 
+from bagport.bags.interface import BagReader
 from bagport.bags.message import BagMessage
 from bagport.bags.publish import Int64Array
-from bagport.bags.reader import BagReader
 from bagport.bags.records import BagInfo
 from bagport.bags.remote import TransferStats
 

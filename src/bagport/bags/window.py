@@ -6,9 +6,9 @@ from collections.abc import Iterator, Sequence
 
 import numpy as np
 
+from bagport.bags.interface import BagReader
 from bagport.bags.message import BagMessage
 from bagport.bags.publish import Int64Array
-from bagport.bags.reader import BagReader
 from bagport.bags.view import ReaderView
 
 __all__ = ["BagWindow"]

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import tempfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -109,8 +108,8 @@ def output_fs(uri: str, what: str) -> tuple[AbstractFileSystem, str]:
 
 
 def check_writable(fs: AbstractFileSystem, path: str, uri: str, what: str, *, beside: bool = False) -> None:
-    """A local ``path`` (of :func:`output_fs`) this user cannot write is one paragraph: a folder is made and
-    removed where the run will write (the nearest folder of ``path`` that exists; with ``beside``, also its
+    """A local ``path`` (of :func:`output_fs`) this user cannot write is one paragraph: a temporary file is
+    opened where the run will write (the nearest folder of ``path`` that exists; with ``beside``, also its
     parent's, where a dataset's build folder goes). Object stores are not checked here."""
     if not is_local(fs):
         return
@@ -133,22 +132,21 @@ def _nearest_folder(path: Path, uri: str, what: str) -> Path | None:
 
 
 def _check_local_folder(path: Path, uri: str, what: str) -> None:
-    """The nearest folder of ``path`` must take a new folder: one this user cannot write (permissions, a
+    """The nearest folder of ``path`` must take a new file: one this user cannot write (permissions, a
     read-only mount, /proc) failed every episode with a bare ``PermissionError``; said once, before anything
     converts."""
     folder = _nearest_folder(path, uri, what)
     if folder is None:
         return
-    try:
-        made = Path(tempfile.mkdtemp(prefix=".bagport-write-check-", dir=folder))
+    try:  # an unnamed file where the OS has them (O_TMPFILE): nothing to remove, nothing left if killed
+        with tempfile.TemporaryFile(prefix=".bagport-write-check-", dir=folder):
+            pass
     except OSError as err:
         raise DatasetWriteError(
             f"{what} {uri}: nothing can be written in {folder} ({err.strerror or err}); nothing was converted "
             "or written. Fix: give a folder this user can write (check its owner and permissions, the free "
             "space, and whether it is mounted read-only)."
         ) from err
-    with contextlib.suppress(FileNotFoundError):  # another run emptying a shared staging store took it
-        made.rmdir()
 
 
 def require_bucket(fs: AbstractFileSystem, path: str, uri: str) -> None:

@@ -196,7 +196,7 @@ def _parse_yaml(text: str, source: str) -> YamlSource:
         return load_yaml(text, source)
     except DuplicateKeyError as err:
         raise ManifestError(
-            f"key {err.key!r} is given twice (also line {err.first_line}); YAML would silently keep the last",
+            err.said,
             file=source,
             entry=_entry_of(err.loc),
             line=err.line,

@@ -101,6 +101,11 @@ class DuplicateKeyError(yaml.MarkedYAMLError):
     def __str__(self) -> str:  # MarkedYAMLError's adds a snippet of the file over several lines
         return f"line {self.line}: {self.problem}"
 
+    @property
+    def said(self) -> str:
+        """The problem as a contract's or manifest's error says it, where the error gives the line itself."""
+        return f"key {self.key!r} is given twice (also line {self.first_line}); YAML would silently keep the last"
+
 
 def _refuse_duplicate_keys(root: yaml.Node) -> None:
     """Raise :class:`DuplicateKeyError` for the first mapping under ``root`` that gives a key twice

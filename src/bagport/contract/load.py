@@ -31,7 +31,7 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
         source = load_yaml(text, name)
     except DuplicateKeyError as err:
         raise ContractError(
-            f"key {err.key!r} is given twice (also line {err.first_line}); YAML would silently keep the last",
+            err.said,
             file=name,
             line=err.line,
             field=field_of(err.loc) or None,

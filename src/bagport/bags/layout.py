@@ -42,6 +42,8 @@ class ReadPlan:
     warnings: list[str] = field(default_factory=list)
     message_compression: bool = False
     """Payloads are zstd-compressed one by one and rosbags does not know (metadata bypassed)."""
+    custom_data: dict[str, str] = field(default_factory=dict)
+    """``metadata.yaml``'s ``custom_data`` (``{}`` without one, or when it is not a mapping)."""
 
 
 def _natural_key(path: BagPath) -> list[Any]:
@@ -84,6 +86,11 @@ def _metadata_problem(metadata: dict[str, Any], present: list[BagPath], storage:
     if sorted(listed) != sorted(names):
         return f"metadata.yaml lists {listed} but the folder has {names}"
     return None
+
+
+def _custom_data(metadata: dict[str, Any]) -> dict[str, str]:
+    data = metadata.get("custom_data")
+    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
 
 
 def _other_recording(metadata: dict[str, Any], present: list[BagPath], storage: Storage) -> list[BagPath]:
@@ -140,8 +147,9 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
         if problem is None:
             folder = _alias(path, "bag", scratch) if path.suffix == ".bag" else path
             return ReadPlan(
-                [folder], [*present, path / "metadata.yaml"], present, _ignoring(ignored, storage)
-            )
+                [folder], [*present, path / "metadata.yaml"], present, _ignoring(ignored, storage),
+                custom_data=_custom_data(metadata),
+            )  # fmt: skip
         mode = str(metadata.get("compression_mode") or "").lower()
         if mode == "file":
             raise BagReadError(
@@ -157,6 +165,7 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
             usable,
             [*_ignoring(ignored, storage), warning],
             message_compression=mode == "message",
+            custom_data=_custom_data(metadata),
         )
     usable, renamed = _usable(present, storage, uri)
     return ReadPlan(renamed.opened(usable, scratch), list(present), usable, renamed.warnings())

@@ -26,7 +26,6 @@ from bagport.bags.interface import BagReader
 from bagport.bags.layout import BagPath, ReadPlan, plan_reads
 from bagport.bags.mcap_layout import check_summaries
 from bagport.bags.message import BagMessage, HeaderLayout
-from bagport.bags.metadata_yaml import read_metadata
 from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
 from bagport.bags.remote import RemoteBag, RemotePath, TransferStats
@@ -50,13 +49,6 @@ _STAMP_FIRST = frozenset({RosType.COMPRESSED_VIDEO.value})
 """Types without a Header whose first field is the capture time (foxglove's ``timestamp``)."""
 RANGED_STORAGES = frozenset({Storage.MCAP})
 """Read in place on remote stores (summary + chunk index); other formats are downloaded first."""
-
-
-def _custom_data(path: BagPath, uri: str) -> dict[str, str]:
-    """``metadata.yaml``'s ``custom_data``, ``{}`` when there is none or it is not a mapping (the layout has
-    read the file already and refused one it cannot use)."""
-    data = (read_metadata(path, uri) or {}).get("custom_data")
-    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
 
 
 class RosbagsReader:
@@ -84,7 +76,7 @@ class RosbagsReader:
         self._mcap_files = plan.data_files if storage is Storage.MCAP else []
         self._data_files = plan.data_files
         self._lacking = self._open(plan, storage, msg_definitions)
-        self._info = self._bag_info(path, storage, plan)
+        self._info = self._bag_info(storage, plan)
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
         if remote is not None:
             self._transfer = remote.stats
@@ -134,7 +126,7 @@ class RosbagsReader:
             raise
         return lacking
 
-    def _bag_info(self, path: BagPath, storage: Storage, plan: ReadPlan) -> BagInfo:
+    def _bag_info(self, storage: Storage, plan: ReadPlan) -> BagInfo:
         """The open bag's facts; keeps what its index promises per topic (:meth:`_check_counts`)."""
         counts: dict[str, tuple[str, int]] = {}
         for conn in self._reader.connections:
@@ -154,7 +146,7 @@ class RosbagsReader:
             end_ns=end_ns,
             message_count=message_count,
             topics=tuple(TopicInfo(name, mt, c) for name, (mt, c) in sorted(counts.items())),
-            custom_data=_custom_data(path, self._uri),
+            custom_data=plan.custom_data,
             checksums=bag_checksums(storage, plan.data_files),
             warnings=(*plan.warnings, *self._reader.warnings(), *stale),
             listed_span_ns=listed_ns if stale else None,

@@ -18,12 +18,12 @@ from pathlib import Path
 from typing import IO
 
 from bagport.bags.detect import MCAP_MAGIC as MAGIC
+from bagport.bags.mcap_tail import RECORD_HEAD, record_heads
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
 __all__ = ["FIX", "LayoutDamage", "check_summaries", "mcap_layout_damage", "summary_damage"]
 
-_HEAD = struct.Struct("<BQ")
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary start, summary offset start, summary CRC
 _TAIL = _FOOTER.size + len(MAGIC)
 _CHUNK_INDEX_HEAD = struct.Struct("<QQQQ")
@@ -82,7 +82,7 @@ def _footer(handle: IO[bytes], size: int) -> tuple[int, int, int] | LayoutDamage
     at = size - _TAIL
     handle.seek(at)
     opcode, length, summary_at, offsets_at, _crc = _FOOTER.unpack(handle.read(_FOOTER.size))
-    if (opcode, length) != (_FOOTER_OP, _FOOTER.size - _HEAD.size):
+    if (opcode, length) != (_FOOTER_OP, _FOOTER.size - RECORD_HEAD.size):
         return LayoutDamage(at, f"the footer record is damaged (opcode {opcode:#04x}, length {length})")
     for name, value in (("summary section", summary_at), ("summary offsets", offsets_at)):
         if value and not len(MAGIC) <= value <= at:
@@ -160,25 +160,25 @@ def _summary_records(buf: bytes, start: int) -> LayoutDamage | None:
     channels: list[tuple[int, int, str, int]] = []
     while pos < len(buf):
         offset = start + pos
-        if pos + _HEAD.size > len(buf):
+        if pos + RECORD_HEAD.size > len(buf):
             return _misframed(offset, "a summary record header is cut off by the footer", previous)
-        opcode, length = _HEAD.unpack_from(buf, pos)
+        opcode, length = RECORD_HEAD.unpack_from(buf, pos)
         if opcode < 0x80 and opcode not in _SUMMARY_OPCODES:
             what = f"the summary holds a record of opcode {opcode:#04x}, which no summary has"
             return _misframed(offset, what, previous)
-        if length > len(buf) - pos - _HEAD.size:
+        if length > len(buf) - pos - RECORD_HEAD.size:
             what = (
                 f"the summary's {_record_name(opcode)} is damaged: its length {length} runs past the summary's "
                 f"end at byte {start + len(buf)}"
             )
             return _misframed(offset, what, previous)
         try:
-            body = buf[pos + _HEAD.size : pos + _HEAD.size + length]
+            body = buf[pos + RECORD_HEAD.size : pos + RECORD_HEAD.size + length]
             _check_summary_record(opcode, body, schemas, channels, offset, start)
         except (_BadFieldError, struct.error, UnicodeDecodeError) as err:
             why = err.args[0] if isinstance(err, _BadFieldError) else "a field does not parse"
             return LayoutDamage(offset, f"the summary's {_record_name(opcode)} is damaged: {why}")
-        previous, pos = offset, pos + _HEAD.size + length
+        previous, pos = offset, pos + RECORD_HEAD.size + length
     for offset, channel_id, topic, schema_id in channels:
         if schema_id not in schemas:
             what = f"the summary's channel {channel_id} ({topic}) names schema {schema_id}, which the summary lacks"
@@ -238,19 +238,16 @@ def _check_chunk_index(body: bytes, data_end: int) -> None:
 def _data_damage(handle: IO[bytes], end: int, size: int) -> LayoutDamage | None:
     """The first record header of the data section (from the leading magic to ``end``) with an unknown
     opcode or a length past ``end``."""
-    pos, previous = len(MAGIC), None
-    while pos < end:
-        handle.seek(pos)
-        head = handle.read(_HEAD.size)
-        if len(head) < _HEAD.size:
+    previous = None
+    for pos, opcode, length in record_heads(handle, len(MAGIC), end):
+        if opcode is None:
             return _misframed(pos, "a record header is cut off", previous)
-        opcode, length = _HEAD.unpack(head)
         if pos == len(MAGIC) and opcode != _HEADER:
             return LayoutDamage(pos, f"the header record is damaged: its opcode is {opcode:#04x}, not 0x01")
         if opcode != _HEADER and opcode < 0x80 and opcode not in _DATA_OPCODES:
             what = f"the record here has opcode {opcode:#04x}, which no data section holds"
             return _misframed(pos, what, previous)
-        if pos + _HEAD.size + length > end:
+        if pos + RECORD_HEAD.size + length > end:
             limit = "the file's end" if end == size - _TAIL else f"the summary's start at byte {end}"
             what = (
                 f"the {_record_name(opcode)} is damaged: its length {length} runs past {limit} "
@@ -259,5 +256,5 @@ def _data_damage(handle: IO[bytes], end: int, size: int) -> LayoutDamage | None:
             return _misframed(pos, what, previous)
         if opcode == _DATA_END:
             return None
-        previous, pos = pos, pos + _HEAD.size + length
+        previous = pos
     return None

@@ -9,6 +9,7 @@ headers (a seek per record: nothing is read into memory).
 from __future__ import annotations
 
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO
@@ -16,8 +17,9 @@ from typing import IO
 from bagport.bags.detect import MCAP_MAGIC as MAGIC
 from bagport.bags.remote import RemotePath
 
-__all__ = ["FIX", "MAGIC", "McapCut", "mcap_cut"]
-_RECORD_HEAD = struct.Struct("<BQ")
+__all__ = ["FIX", "MAGIC", "RECORD_HEAD", "McapCut", "mcap_cut", "record_heads"]
+RECORD_HEAD = struct.Struct("<BQ")
+"""A record's opcode and length, before its body."""
 _CHUNK, _DATA_END = 0x06, 0x0F
 
 
@@ -78,19 +80,30 @@ def mcap_cut(path: Path | RemotePath) -> McapCut | None:
         return _walk(handle, path.name, size)
 
 
+def record_heads(handle: IO[bytes], start: int, end: int) -> Iterator[tuple[int, int | None, int]]:
+    """``(offset, opcode, length)`` of each record from byte ``start`` while before ``end``, a seek and a
+    9-byte read per record (nothing else is read); a header the file ends inside is ``(offset, None, 0)``, the
+    last. The caller stops at a length it finds wrong."""
+    pos = start
+    while pos < end:
+        head = handle.read(RECORD_HEAD.size) if handle.seek(pos) == pos else b""
+        if len(head) < RECORD_HEAD.size:
+            yield pos, None, 0
+            return
+        opcode, length = RECORD_HEAD.unpack(head)
+        yield pos, opcode, length
+        pos += RECORD_HEAD.size + length
+
+
 def _walk(handle: IO[bytes], name: str, size: int) -> McapCut:
     """Record headers from the leading magic on, to the one the file ends inside."""
-    pos, chunks = len(MAGIC), 0
-    while pos < size:
-        head = handle.read(_RECORD_HEAD.size) if handle.seek(pos) == pos else b""
-        if len(head) < _RECORD_HEAD.size:
+    chunks = 0
+    for pos, opcode, length in record_heads(handle, len(MAGIC), size):
+        if opcode is None:
             return McapCut(name, size, pos, chunks, data_whole=False)
-        opcode, length = _RECORD_HEAD.unpack(head)
         if opcode == _DATA_END:
             return McapCut(name, size, None, chunks, data_whole=True)
-        end = pos + _RECORD_HEAD.size + length
-        if end > size:
+        if pos + RECORD_HEAD.size + length > size:
             return McapCut(name, size, pos, chunks, data_whole=False)
         chunks += opcode == _CHUNK
-        pos = end
     return McapCut(name, size, None, chunks, data_whole=False)

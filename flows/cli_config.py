@@ -16,6 +16,7 @@ from pydantic.fields import FieldInfo
 
 from bagport.config import CliOption, ConvertConfig, cli_option
 from bagport.errors import BagportError
+from bagport.uris import UTF8_FIX
 from bagport.yamlsource import load_yaml
 
 __all__ = [
@@ -65,7 +66,7 @@ def _yaml_file(path: Path, what: str) -> Any:
         ) from err
     except UnicodeDecodeError as err:
         raise BagportError(
-            f"{what}: {path} is not UTF-8 text (the byte at offset {err.start} is not). Fix: save it as UTF-8."
+            f"{what}: {path} is not UTF-8 text (the byte at offset {err.start} is not). Fix: {UTF8_FIX}"
         ) from err
     except OSError as err:
         raise BagportError(

@@ -16,7 +16,6 @@ from pydantic.fields import FieldInfo
 
 from bagport.config import CliOption, ConvertConfig, cli_option
 from bagport.errors import BagportError
-from bagport.uris import UTF8_FIX
 from bagport.yamlsource import load_yaml
 
 __all__ = [
@@ -65,6 +64,8 @@ def _yaml_file(path: Path, what: str) -> Any:
             f"{what}: {path} is not valid YAML{where} ({problem}). Fix: correct the file."
         ) from err
     except UnicodeDecodeError as err:
+        from bagport.uris import UTF8_FIX  # noqa: PLC0415 - fsspec with it: not on `--help`'s path
+
         raise BagportError(
             f"{what}: {path} is not UTF-8 text (the byte at offset {err.start} is not). Fix: {UTF8_FIX}"
         ) from err

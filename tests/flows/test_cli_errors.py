@@ -312,3 +312,26 @@ def test_codec_settings_the_encoder_refuses_are_one_paragraph_before_any_bag(
         err = capfd.readouterr().err
         assert f"error: the codec settings cannot encode video: {said}" in err and "Traceback" not in err
         assert "bagport-episode" not in err and not (tmp_path / "out.staging").exists()
+
+
+def test_a_codec_file_that_is_not_utf8_is_one_paragraph(
+    tmp_path: Path, capfd: pytest.CaptureFixture[str]
+) -> None:
+    latin1 = tmp_path / "latin1.yaml"
+    latin1.write_bytes(b"codec: libx264 # caf\xe9\n")
+    argv = [
+        "convert",
+        "--glob",
+        str(tmp_path / "*.mcap"),
+        "--contract",
+        str(SAMPLE_CONTRACT),
+        "--output",
+        "o",
+    ]
+    assert main([*argv, "--codec", str(latin1)]) == 2
+    err = capfd.readouterr().err
+    assert (
+        f"--codec {latin1}: {latin1} is not UTF-8 text (the byte at offset 20 is not). Fix: save it as UTF-8 (from Latin-1: `iconv"
+        in err
+    )
+    assert "Traceback" not in err

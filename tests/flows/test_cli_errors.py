@@ -245,7 +245,7 @@ def test_an_append_the_commit_refuses_is_one_paragraph_without_leak_reports(tmp_
 def test_a_codec_or_config_file_that_is_not_yaml_is_one_paragraph(
     tmp_path: Path, capfd: pytest.CaptureFixture[str]
 ) -> None:
-    """Fuzzed inputs that escaped as yaml's ParserError."""
+    """Fuzzed inputs that escaped as yaml's ParserError (and a file that is not UTF-8)."""
     broken = tmp_path / "broken.yaml"
     broken.write_text("codec: [libx264\n")
     argv = [
@@ -272,6 +272,13 @@ def test_a_codec_or_config_file_that_is_not_yaml_is_one_paragraph(
     assert (
         "no such file, and no preset of that name. Fix: give a preset (archival, h264-fast, lerobot-default)"
         in (capfd.readouterr().err)
+    )
+    latin1 = tmp_path / "latin1.yaml"
+    latin1.write_bytes(b"codec: libx264 # caf\xe9\n")
+    assert main([*argv, "--codec", str(latin1)]) == 2
+    assert (
+        f"--codec {latin1}: {latin1} is not UTF-8 text (the byte at offset 20 is not). Fix: save it as UTF-8 "
+        "(from Latin-1: `iconv" in capfd.readouterr().err
     )
 
 
@@ -312,26 +319,3 @@ def test_codec_settings_the_encoder_refuses_are_one_paragraph_before_any_bag(
         err = capfd.readouterr().err
         assert f"error: the codec settings cannot encode video: {said}" in err and "Traceback" not in err
         assert "bagport-episode" not in err and not (tmp_path / "out.staging").exists()
-
-
-def test_a_codec_file_that_is_not_utf8_is_one_paragraph(
-    tmp_path: Path, capfd: pytest.CaptureFixture[str]
-) -> None:
-    latin1 = tmp_path / "latin1.yaml"
-    latin1.write_bytes(b"codec: libx264 # caf\xe9\n")
-    argv = [
-        "convert",
-        "--glob",
-        str(tmp_path / "*.mcap"),
-        "--contract",
-        str(SAMPLE_CONTRACT),
-        "--output",
-        "o",
-    ]
-    assert main([*argv, "--codec", str(latin1)]) == 2
-    err = capfd.readouterr().err
-    assert (
-        f"--codec {latin1}: {latin1} is not UTF-8 text (the byte at offset 20 is not). Fix: save it as UTF-8 (from Latin-1: `iconv"
-        in err
-    )
-    assert "Traceback" not in err

@@ -17,6 +17,7 @@ __all__ = [
     "DecodeError",
     "EncoderSettingsError",
     "ManifestError",
+    "OutputInBagError",
     "OutputTakenError",
     "PushError",
     "QualityError",
@@ -180,6 +181,22 @@ class OutputTakenError(DatasetWriteError):
             "that run's output is kept and this run's was not published there. Fix: write to a new --output, "
             "or, for a LeRobot dataset, add this run's bags to it with --append (the episodes this run staged "
             "are reused); one run at a time per output."
+        )
+
+
+class OutputInBagError(DatasetWriteError):
+    """An ``--output`` (or ``--staging``: :attr:`option`) that is, or is inside, one of the run's bags: the
+    run would write into a recording, so it refuses before anything is written."""
+
+    def __init__(self, *, option: str, path: str, bag_uri: str) -> None:
+        self.option = option
+        """The option that names the place: ``--output`` or ``--staging``."""
+        self.path = path
+        self.bag_uri = bag_uri
+        written = "the staged episodes" if option == "--staging" else "the dataset"
+        super().__init__(
+            f"{option} {path} is inside the bag {bag_uri}: {written} would be written into a recording of the "
+            f"run; nothing was written. Fix: choose a {option} outside the bags' folders."
         )
 
 

@@ -16,7 +16,7 @@ from fsspec.core import url_to_fs
 from bagport.dataset.layout import INFO_PATH
 from bagport.dataset.publish import building_beside, swap_into_place
 from bagport.dataset.remote import publish_remote
-from bagport.errors import DatasetWriteError
+from bagport.errors import DatasetWriteError, OutputInBagError
 from bagport.scratch import scratch_folder
 from bagport.uris import is_local
 
@@ -64,11 +64,7 @@ def refuse_output_in_a_bag(output: str, inputs: Sequence[str], what: str = "--ou
         bag_fs, bag_path = url_to_fs(uri)
         bag_real = _real(bag_fs, bag_path).rstrip("/")
         if bag_fs.protocol == fs.protocol and (out_real == bag_real or out_real.startswith(bag_real + "/")):
-            written = "the staged episodes" if what == "--staging" else "the dataset"
-            raise DatasetWriteError(
-                f"{what} {output} is inside the bag {uri}: {written} would be written into a recording of "
-                f"the run; nothing was written. Fix: choose a {what} outside the bags' folders."
-            )
+            raise OutputInBagError(option=what, path=output, bag_uri=uri)
 
 
 def _real(fs: AbstractFileSystem, path: str) -> str:

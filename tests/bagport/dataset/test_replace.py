@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from bagport.dataset.replace import refuse_existing, refuse_output_in_a_bag
-from bagport.errors import DatasetWriteError
+from bagport.errors import DatasetWriteError, OutputInBagError
 
 
 def test_a_missing_output_is_free_and_an_existing_one_needs_overwrite(tmp_path: Path) -> None:
@@ -75,9 +75,15 @@ def test_an_output_in_a_bag_of_the_run_is_refused(tmp_path: Path, monkeypatch: p
     bag.mkdir(parents=True)
     inputs = [str(tmp_path / "bags/other.mcap"), str(bag)]
     for output in (bag / "out", bag, bag / "deeper/out"):
-        with pytest.raises(DatasetWriteError, match=rf"--output {output} is inside the bag {bag}:") as caught:
+        with pytest.raises(OutputInBagError, match=rf"--output {output} is inside the bag {bag}:") as caught:
             refuse_output_in_a_bag(str(output), inputs)
         assert "nothing was written. Fix: choose a --output outside the bags' folders." in str(caught.value)
+        assert (caught.value.option, caught.value.path, caught.value.bag_uri) == (
+            "--output",
+            str(output),
+            str(bag),
+        )
+        assert isinstance(caught.value, DatasetWriteError)  # a write error like the others (exit code 2)
     monkeypatch.chdir(bag)
     with pytest.raises(DatasetWriteError, match="is inside the bag"):  # --output out, run from the bag
         refuse_output_in_a_bag("out", inputs)
@@ -88,6 +94,7 @@ def test_an_output_in_a_bag_of_the_run_is_refused(tmp_path: Path, monkeypatch: p
     refuse_output_in_a_bag(str(tmp_path / "bags/ep1-dataset"), inputs)
     refuse_output_in_a_bag(str(tmp_path / "datasets/ep1"), inputs)
     with pytest.raises(
-        DatasetWriteError, match=rf"--staging {bag}/st is inside the bag {bag}: the staged episodes"
-    ):
+        OutputInBagError, match=rf"--staging {bag}/st is inside the bag {bag}: the staged episodes"
+    ) as caught:
         refuse_output_in_a_bag(str(bag / "st"), inputs, "--staging")
+    assert (caught.value.option, caught.value.bag_uri) == ("--staging", str(bag))

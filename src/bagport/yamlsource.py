@@ -167,6 +167,8 @@ class ValidationProblem:
     line: int | None
     field: str
     fix: str
+    missing: bool = False
+    """The field is required and absent (not present with a bad value)."""
 
 
 def explain_validation(
@@ -184,7 +186,7 @@ def explain_validation(
         msg = "unknown field"
     more = f" ({len(errors) - 1} more problem(s) after this one)" if len(errors) > 1 else ""
     fix = _suggest(model, loc, first["type"]) or default_fix
-    return ValidationProblem(msg + more, source.line_of(loc), field, fix)
+    return ValidationProblem(msg + more, source.line_of(loc), field, fix, missing=first["type"] == "missing")
 
 
 def _suggest(model: type[pydantic.BaseModel], loc: tuple[int | str, ...], err_type: str) -> str:

@@ -55,7 +55,9 @@ def parse_contract(text: str, name: str = "contract") -> ContractPlan:
         default_fix = "see the contract format in docs/contracts.md."
         problem = explain_validation(err, source, Contract, default_fix)
         last = problem.field.rsplit(".", 1)[-1].split("[", 1)[0]
-        fix = _FIELD_FIXES.get(last, problem.fix) if problem.fix == default_fix else problem.fix
+        fix = problem.fix
+        if problem.fix == default_fix:  # a field's own advice on its format: for a value, not a missing key
+            fix = f"add its '{last}:' key; {default_fix}" if problem.missing else _FIELD_FIXES.get(last, fix)
         raise ContractError(problem.what, file=name, line=problem.line, field=problem.field, fix=fix) from err
     plan = compile_contract(contract, name, source.line_of)
     for src in plan.sources:

@@ -46,11 +46,17 @@ def test_unknown_top_level_key_suggests_the_nearest() -> None:
 def test_missing_required_field() -> None:
     _raises(
         f"robot_type: r\nfps: 30\nobservations:\n  - key: s\n    type: {FLOAT}\n",
-        r"^robot\.yaml:4 \(observations\[0\]\.topic\): required field is missing",
+        # the field's advice on its format (topics are absolute) is for a value given, not a key left out
+        r"^robot\.yaml:4 \(observations\[0\]\.topic\): required field is missing Fix: add its 'topic:' key; "
+        r"see the contract format in docs/contracts\.md\.$",
     )
     _raises(
         "robot_type: r\nactions:\n  - key: action\n    publish: {topic: /cmd}\n",
-        r"^robot\.yaml:4 \(actions\[0\]\.publish\.type\): required field is missing",
+        r"^robot\.yaml:4 \(actions\[0\]\.publish\.type\): required field is missing Fix: add its 'type:' key",
+    )
+    _raises(  # a value given that is not a topic keeps the field's advice
+        f"robot_type: r\nfps: 30\nobservations:\n  - key: s\n    topic: [a]\n    type: {FLOAT}\n",
+        r"^robot\.yaml:5 \(observations\[0\]\.topic\): .* Fix: ROS topic names are absolute",
     )
 
 

@@ -84,6 +84,7 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
         import pydantic  # noqa: PLC0415
 
         from bagport.errors import BagportError  # noqa: PLC0415
+        from bagport.hub.push import check_repo_id  # noqa: PLC0415
         from bagport.qa import episode_ref  # noqa: PLC0415
         from bagport.reduce import finish_nothing_new, finish_up_to_date, summary_json  # noqa: PLC0415
         from bagport.run import plan_run, up_to_date  # noqa: PLC0415
@@ -102,8 +103,9 @@ def _convert(args: argparse.Namespace, *, throwaway_api: bool = False) -> int:
             "repo_id: in the --config file), keep lerobot in --format and a local --output (push one on an "
             "object store from a local copy)"
         )
-    if args.push_to_hub:
-        hf_token()  # before converting, not after
+    if args.push_to_hub:  # before converting, not after
+        check_repo_id(config.resolved_repo_id())
+        hf_token()
     started = time.perf_counter()
     show_bar = not args.quiet and sys.stderr.isatty()
     plan = plan_run(config)  # bad manifests, contracts and outputs fail here, before Prefect starts

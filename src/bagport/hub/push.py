@@ -15,6 +15,8 @@ the Hub is scrubbed of it before it is raised.
 
 from __future__ import annotations
 
+import json
+import re
 from contextlib import suppress
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,13 +27,30 @@ from bagport.errors import PushError
 from bagport.hub.redact import ProvenanceChoice, publish_view
 from bagport.scratch import scratch_folder
 
-__all__ = ["PushReport", "push_dataset"]
+__all__ = ["PushReport", "check_repo_id", "push_dataset"]
 
 _PROVENANCE_WORDS = {
     "full": "included as written (bag paths and manifest metadata)",
     "redacted": "redacted (bag, manifest and contract paths reduced to their names; manifest metadata removed)",
     "excluded": "left out (meta/provenance not pushed; the QA record redacted)",
 }
+
+
+_REPO_PART = r"[A-Za-z0-9](?:[A-Za-z0-9._-]{0,94}[A-Za-z0-9])?"
+_REPO_ID = re.compile(rf"{_REPO_PART}/{_REPO_PART}")
+"""A Hub dataset repo id as bagport pushes it: ``ORG/NAME``, each part letters, digits, ``-``, ``_`` and ``.``,
+starting and ending with a letter or digit (the Hub's own rules, which ``huggingface_hub`` checks too)."""
+
+
+def check_repo_id(repo_id: str) -> None:
+    """Refuse a repo id that is not ``ORG/NAME`` before anything is converted or uploaded: without the
+    organisation the Hub would put the dataset under whichever account the token belongs to."""
+    if _REPO_ID.fullmatch(repo_id) is None or "--" in repo_id or ".." in repo_id:
+        raise PushError(
+            f"--repo-id {repo_id!r} is not a Hub dataset repo id ORG/NAME; nothing was pushed. Fix: give the "
+            "organisation (or user) and the dataset's name, letters, digits, '-', '_' and '.', such as "
+            "my-lab/pick-cube."
+        )
 
 
 @dataclass(frozen=True, slots=True)
@@ -64,14 +83,16 @@ def push_dataset(
     license: str = "apache-2.0",
 ) -> PushReport:
     """Upload the LeRobot dataset at ``root`` to the Hub's dataset repo ``repo_id``."""
-    if not (root / INFO_PATH).is_file():
-        raise PushError(
-            f"{root} is not a LeRobot dataset (no {INFO_PATH}); nothing was pushed. Fix: give the --output "
-            "folder of a finished `bagport convert` (a local folder)."
-        )
+    check_repo_id(repo_id)
+    _check_lerobot_dataset(root)
     try:
+        import httpx  # noqa: PLC0415 - huggingface_hub's HTTP client
         from huggingface_hub import HfApi  # noqa: PLC0415 - comes with the lerobot extra
-        from huggingface_hub.errors import HfHubHTTPError, RevisionNotFoundError  # noqa: PLC0415
+        from huggingface_hub.errors import (  # noqa: PLC0415
+            HfHubHTTPError,
+            OfflineModeIsEnabled,
+            RevisionNotFoundError,
+        )
         from lerobot.datasets.io_utils import load_info  # noqa: PLC0415
         from lerobot.datasets.utils import create_lerobot_dataset_card  # noqa: PLC0415
     except ImportError as err:
@@ -99,10 +120,21 @@ def push_dataset(
                 api.delete_tag(repo_id, tag=CODEBASE_VERSION, repo_type="dataset")
             api.create_tag(repo_id, tag=CODEBASE_VERSION, revision=revision, repo_type="dataset")
     except HfHubHTTPError as err:
-        message = str(err).replace(token, "***") if token else str(err)
         raise PushError(
-            f"the Hub refused the push of {root} to {repo_id}: {message}. Fix: check that HF_TOKEN is a write "
-            "token of an account that may create or write dataset repos in that organisation."
+            f"the Hub refused the push of {root} to {repo_id}: {_scrubbed(err, token)}. Fix: check that HF_TOKEN "
+            "is a write token of an account that may create or write dataset repos in that organisation."
+        ) from None
+    except OfflineModeIsEnabled:
+        raise PushError(
+            f"HF_HUB_OFFLINE is set, so huggingface_hub may not reach the Hub; nothing of {root} was pushed. "
+            "Fix: run the push with HF_HUB_OFFLINE unset (or 0); bagport's scripts/env.sh sets it for its tests "
+            "and demo."
+        ) from None
+    except httpx.TransportError as err:
+        raise PushError(
+            f"the Hub could not be reached to push {root} to {repo_id} ({type(err).__name__}: "
+            f"{_scrubbed(err, token)}); the push may have stopped part-way, the dataset's v3.0 tag only moves "
+            "when it completes. Fix: check the network (and HF_ENDPOINT, if set), then push again."
         ) from None
     return PushReport(
         repo_id,
@@ -113,3 +145,37 @@ def push_dataset(
         provenance,
         private,
     )
+
+
+def _scrubbed(err: BaseException, token: str) -> str:
+    return str(err).replace(token, "***") if token else str(err)
+
+
+def _check_lerobot_dataset(root: Path) -> None:
+    """A local LeRobot v3.0 dataset, or a :class:`PushError` saying what ``root`` is instead (another
+    ``--format``'s output, whose ``meta/info.json`` names it, or no dataset at all)."""
+    info_path = root / INFO_PATH
+    if not info_path.is_file():
+        raise PushError(
+            f"{root} is not a LeRobot dataset (no {INFO_PATH}); nothing was pushed. Fix: give the --output "
+            "folder of a finished `bagport convert` (a local folder)."
+        )
+    try:
+        info = json.loads(info_path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as err:
+        raise PushError(
+            f"{info_path} cannot be read as JSON ({err}); nothing was pushed. Fix: run `bagport validate {root}`, "
+            "then restore the dataset or write it again."
+        ) from None
+    fmt = info.get("format") if isinstance(info, dict) else None
+    version = info.get("codebase_version") if isinstance(info, dict) else None
+    if version != CODEBASE_VERSION:
+        what = (
+            f"the {fmt} output of `bagport convert --format`"
+            if isinstance(fmt, str)
+            else (f"not a LeRobot {CODEBASE_VERSION} dataset (its codebase_version is {version!r})")
+        )
+        raise PushError(
+            f"{root} is {what}; only a LeRobot {CODEBASE_VERSION} dataset is pushed, nothing was. Fix: push the "
+            "LeRobot output of the run (its --output folder)."
+        )

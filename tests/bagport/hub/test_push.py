@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import os
+import socket
 import subprocess
 import sys
 from collections.abc import Iterator
@@ -33,7 +34,9 @@ def hub() -> Iterator[FakeHub]:
         yield running
 
 
-def _run(root: Path, hub: FakeHub, *args: str, token: str | None = TOKEN) -> subprocess.CompletedProcess[str]:
+def _run(
+    root: Path, hub: FakeHub, *args: str, token: str | None = TOKEN, **env_over: str
+) -> subprocess.CompletedProcess[str]:
     env = {k: v for k, v in os.environ.items() if k not in ("PREFECT_API_URL", "HF_TOKEN")}
     env.update(
         HF_ENDPOINT=hub.endpoint,
@@ -42,6 +45,7 @@ def _run(root: Path, hub: FakeHub, *args: str, token: str | None = TOKEN) -> sub
         PREFECT_HOME=str(root / "prefect"),  # its logs and database, searched for the token below
         PREFECT_LOGGING_LEVEL="DEBUG",
     )
+    env.update(env_over)
     if token is not None:
         env["HF_TOKEN"] = token
     return subprocess.run(
@@ -170,3 +174,63 @@ def test_push_without_a_token_or_dataset_says_how_to_fix_it(
     done = _run(root, hub, "push", str(root / "fleet"), "--repo-id", "bagport-test/none")
     assert done.returncode == 2 and "is not a LeRobot dataset (no meta/info.json)" in done.stderr
     assert "bagport-test/none" not in hub.repos
+
+
+def test_push_refuses_a_bad_repo_id_and_another_formats_output_before_uploading(
+    converted: tuple[Path, subprocess.CompletedProcess[str]], hub: FakeHub, tmp_path: Path
+) -> None:
+    root, _ = converted
+    for repo_id in ("fleet", "a/b/c", "-lab/x", "lab/x.", "lab/x..y", "lab/my data"):
+        done = _run(root, hub, "push", str(root / "ds"), f"--repo-id={repo_id}")
+        assert done.returncode == 2, (repo_id, done.stderr[-2000:])
+        assert (
+            f"--repo-id {repo_id!r} is not a Hub dataset repo id ORG/NAME; nothing was pushed." in done.stderr
+        )
+        assert "Traceback" not in done.stderr
+    # convert --push-to-hub refuses it before converting anything
+    out = tmp_path / "not-written"
+    done = _run(
+        root, hub, "convert", "--manifest", str(root / "fleet" / "manifest.yaml"), "--contract",
+        str(SAMPLE_CONTRACT), "--output", str(out), "--repo-id", "fleet", "--push-to-hub",
+    )  # fmt: skip
+    assert done.returncode == 2 and "is not a Hub dataset repo id ORG/NAME" in done.stderr, done.stderr[
+        -2000:
+    ]
+    assert not out.exists()
+    # an HDF5 (or Robo-DM) output has a meta/info.json of its own: named, not a traceback from LeRobot's reader
+    other = tmp_path / "out.hdf5"
+    (other / "meta").mkdir(parents=True)
+    (other / "meta" / "info.json").write_text(json.dumps({"format": "hdf5", "fps": 30}))
+    done = _run(root, hub, "push", str(other), "--repo-id", "bagport-test/other")
+    assert done.returncode == 2, done.stderr[-2000:]
+    assert (
+        f"{other} is the hdf5 output of `bagport convert --format`; only a LeRobot v3.0 dataset is pushed"
+        in (done.stderr)
+    )
+    assert not {"bagport-test/other", "fleet"} & set(hub.repos)
+
+
+def test_push_says_when_the_hub_cannot_be_reached_or_offline_mode_is_on(
+    converted: tuple[Path, subprocess.CompletedProcess[str]], hub: FakeHub
+) -> None:
+    root, _ = converted
+    with socket.socket() as closed:  # a loopback port nothing listens on: connection refused
+        closed.bind(("127.0.0.1", 0))
+        port = closed.getsockname()[1]
+    done = _run(
+        root,
+        hub,
+        "push",
+        str(root / "ds"),
+        "--repo-id",
+        "bagport-test/down",
+        HF_ENDPOINT=f"http://127.0.0.1:{port}",
+    )
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert "the Hub could not be reached to push" in done.stderr and "(ConnectError:" in done.stderr
+    assert "Fix: check the network (and HF_ENDPOINT, if set), then push again." in done.stderr
+    done = _run(root, hub, "push", str(root / "ds"), "--repo-id", "bagport-test/offline", HF_HUB_OFFLINE="1")
+    assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr[-2000:]
+    assert "HF_HUB_OFFLINE is set, so huggingface_hub may not reach the Hub" in done.stderr
+    assert not {"bagport-test/down", "bagport-test/offline"} & set(hub.repos)
+    _assert_token_nowhere(root, done)

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from bagport.errors import BagportError
+from bagport.errors import PushError
 
 if TYPE_CHECKING:
     from bagport.hub import ProvenanceChoice
@@ -19,7 +19,7 @@ __all__ = ["add_push_command", "add_push_options", "hf_token", "push_from_args"]
 def hf_token() -> str:
     token = os.environ.get("HF_TOKEN", "")
     if not token:
-        raise BagportError(
+        raise PushError(
             "HF_TOKEN is not set; nothing was pushed. Fix: export HF_TOKEN=<a write token of your Hugging Face "
             "account> (it is read from the environment only, never from an option, and never printed)."
         )

@@ -16,9 +16,10 @@ from pydantic.fields import FieldInfo
 
 from bagport.config import CliOption, ConvertConfig, cli_option
 from bagport.errors import BagportError
-from bagport.yamlsource import load_yaml
+from bagport.yamlsource import YamlSource, load_yaml
 
 __all__ = [
+    "COMMAND_LINE_ONLY",
     "POSITIVE_INT",
     "PRESETS",
     "add_config_options",
@@ -54,8 +55,13 @@ def load_encoder(value: str | None) -> dict[str, Any]:
 
 def _yaml_file(path: Path, what: str) -> Any:
     """A small YAML file's content; a file that cannot be read or parsed is one paragraph naming it."""
+    return _yaml_source(path, what).data
+
+
+def _yaml_source(path: Path, what: str) -> YamlSource:
+    """A small YAML file with its lines (:func:`_yaml_file`)."""
     try:
-        return load_yaml(path.read_text(encoding="utf-8"), str(path)).data  # a key given twice is refused
+        return load_yaml(path.read_text(encoding="utf-8"), str(path))  # a key given twice is refused
     except yaml.YAMLError as err:
         mark = getattr(err, "problem_mark", None)
         where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
@@ -221,14 +227,47 @@ def resolve_options(options: Mapping[str, Any]) -> dict[str, Any]:
     return resolved
 
 
+COMMAND_LINE_ONLY: dict[str, str] = {
+    "config": "--config",
+    "push_to_hub": "--push-to-hub",
+    "private": "--private",
+    "revision": "--revision",
+    "exclude_provenance": "--exclude-provenance",
+    "full_provenance": "--full-provenance",
+    "quiet": "--quiet",
+    "verbose": "--verbose",
+}
+"""``bagport convert``'s options about the command itself, not the run: no :class:`ConvertConfig` field, so
+no key in a ``--config`` file or a deployment's ``config`` (the key one would write -> the flag to give)."""
+
+
 def _config_file(path: str) -> dict[str, Any]:
-    data = _yaml_file(Path(path), "--config") if Path(path).is_file() else None
-    if not isinstance(data, dict):
+    source = _yaml_source(Path(path), "--config") if Path(path).is_file() else None
+    if source is None or not isinstance(source.data, dict):
         raise BagportError(
             f"--config {path}: not a YAML mapping of run options (or no such file). Fix: give a file such as "
             "'manifest: fleet.yaml\ncontract: robot.yaml\noutput: datasets/robot\nrunner: dask'."
         )
-    return dict(data)
+    _refuse_command_line_only(source, path)
+    return dict(source.data)
+
+
+def _refuse_command_line_only(source: YamlSource, path: str) -> None:
+    """A key of :data:`COMMAND_LINE_ONLY` in the file is named, on its line, with the flag to give instead
+    (the run's options would refuse it as an unknown field, with no hint)."""
+    keys = [key for key in source.data if key in COMMAND_LINE_ONLY]
+    if not keys:
+        return
+    flags = " ".join(COMMAND_LINE_ONLY[key] for key in keys)
+    if len(keys) == 1:
+        where, what, them = f", line {source.line_of(keys)}", f"{keys[0]} is a command-line option", "it"
+    else:
+        found = " and ".join(f"{key} (line {source.line_of((key,))})" for key in keys)
+        where, what, them = "", f"{found} are command-line options", "them"
+    raise BagportError(
+        f"--config {path}{where}: {what} only (about the command, not the run: a run file has no such key). "
+        f"Fix: remove {them} from the file and give {flags} on the command line."
+    )
 
 
 def convert_config(args: argparse.Namespace, defaults: dict[str, Any]) -> ConvertConfig:

@@ -9,7 +9,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Iterator
 
-from flows.cli_config import config_options
+from flows.cli_config import COMMAND_LINE_ONLY, config_options
 
 __all__ = ["render_cli_reference"]
 
@@ -100,7 +100,12 @@ def _config_keys() -> list[str]:
             lines.append(f"| `{option.named}` (a preset), or `{name}` (its settings) | `{option.flag}` |")
         else:
             lines.append(f"| `{name}` | `{option.flag}` |")
-    return [*lines, ""]
+    flags = ", ".join(f"`{flag}`" for flag in COMMAND_LINE_ONLY.values())
+    no_key = (
+        f"Options about the command itself, not the run, have no key: {flags}. A `--config` file that "
+        "gives one (`push_to_hub: true`) is refused with the flag to give instead."
+    )
+    return [*lines, "", no_key, ""]
 
 
 def render_cli_reference(parser: argparse.ArgumentParser) -> str:

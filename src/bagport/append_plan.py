@@ -22,7 +22,7 @@ from bagport.dataset.layout import DEFAULT_FEATURES
 from bagport.episode.checks import bag_fingerprint
 from bagport.errors import BagportError, DatasetWriteError
 from bagport.manifest import BagEntry
-from bagport.video import EncoderSettings
+from bagport.video import EncoderSettings, stream_codec
 
 __all__ = ["bags_to_append", "check_append_fits"]
 
@@ -55,14 +55,30 @@ def _differences(info: dict[str, Any], contract: ContractPlan, encoder: EncoderS
         found.append(f"only in the dataset: {', '.join(only_dataset)}")
     if only_contract := [k for k in want if k not in have]:
         found.append(f"only in the contract: {', '.join(only_contract)}")
+    asked = _asked_info(encoder)
     for feature in (f for f in contract.features if f.key in features):
         video = features[feature.key].get("info") or {}
-        if feature.kind is FeatureKind.VIDEO and not video.get("is_depth_map"):
-            asked = {**encoder.to_info(), "video.pix_fmt": encoder.pix_fmt}
-            if changed := sorted(k for k, v in asked.items() if k in video and video[k] != v):
-                were = ", ".join(f"{k} {video[k]!r} -> {asked[k]!r}" for k in changed)
-                found.append(f"{feature.key} encoder: {were}")
+        if feature.kind is not FeatureKind.VIDEO or video.get("is_depth_map"):
+            continue
+        if changed := [k for k, v in asked.items() if k in video and video[k] != v]:
+            were = ", ".join(f"{k} {video[k]!r} -> {asked[k]!r}" for k in changed)
+            found.append(f"{feature.key} encoder: {were}")
     return found
+
+
+_FIRST = ("video.codec", "video.pix_fmt", "video.g")
+"""The encoder keys a difference names first: the codec itself, then what a decoder sees most."""
+
+
+def _asked_info(encoder: EncoderSettings) -> dict[str, Any]:
+    """The keys ``encoder`` would write in a camera's ``info`` that an append compares, codec first
+    (an encoder this PyAV build lacks has no codec to compare: starting it is refused with its own error)."""
+    info = {**encoder.to_info(), "video.pix_fmt": encoder.pix_fmt}
+    codec = stream_codec(encoder.codec)
+    if codec is not None:
+        info["video.codec"] = codec
+    rank = {key: index for index, key in enumerate(_FIRST)}
+    return {k: info[k] for k in sorted(info, key=lambda k: (rank.get(k, len(rank)), k))}
 
 
 def bags_to_append(

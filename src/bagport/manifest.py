@@ -24,6 +24,7 @@ import pydantic
 import yaml
 from fsspec.core import url_to_fs
 from pydantic import JsonValue
+from pydantic_core import ErrorDetails, PydanticCustomError
 
 from bagport.errors import ManifestError
 from bagport.manifest_csv import csv_entries
@@ -43,6 +44,52 @@ __all__ = ["BagEntry", "Manifest", "load_manifest", "parse_manifest"]
 _GLOB_CHARS = frozenset("*?[")
 
 
+_CLASH = "manifest_key_clash"
+"""The pydantic error type of two keys of one entry that do not fit together; its ctx is a :class:`_Clash`."""
+
+
+@dataclass(frozen=True, slots=True)
+class _Clash:
+    """Two keys of one manifest entry that do not fit together (``start_s`` and ``start_ns``...)."""
+
+    what: str
+    keys: tuple[str, str]
+    fix: str
+
+    def error(self) -> PydanticCustomError:
+        return PydanticCustomError(_CLASH, "{what}", {"what": self.what, "keys": self.keys, "fix": self.fix})
+
+    @classmethod
+    def of(cls, error: ErrorDetails) -> _Clash | None:
+        """The clash a pydantic error reports, ``None`` for any other error."""
+        ctx = error.get("ctx")
+        if error["type"] != _CLASH or ctx is None:
+            return None
+        return cls(what=ctx["what"], keys=tuple(ctx["keys"]), fix=ctx["fix"])
+
+
+def _window_clash(entry: _Entry) -> _Clash | None:
+    """The first rule between the window keys of ``entry`` it breaks: an end given on both clocks, or on one
+    clock ending at or before it starts."""
+    for bound in ("start", "end"):
+        in_s, in_ns = f"{bound}_s", f"{bound}_ns"
+        if getattr(entry, in_s) is not None and getattr(entry, in_ns) is not None:
+            return _Clash(
+                f"gives both {in_s} (seconds from the bag's first message) and {in_ns} (ROS time)",
+                (in_s, in_ns),
+                f"keep one of the two: remove {in_s} or {in_ns}.",
+            )
+    for unit in ("s", "ns"):
+        start, end = getattr(entry, f"start_{unit}"), getattr(entry, f"end_{unit}")
+        if start is not None and end is not None and end <= start:
+            return _Clash(
+                f"the window ends (end_{unit} {end}) at or before it starts (start_{unit} {start})",
+                (f"start_{unit}", f"end_{unit}"),
+                f"give an end_{unit} greater than start_{unit}, or leave one of them out (the bag's start or end).",
+            )
+    return None
+
+
 class _Entry(pydantic.BaseModel):
     model_config = pydantic.ConfigDict(extra="forbid", frozen=True)
     uri: str = pydantic.Field(min_length=1)
@@ -55,13 +102,9 @@ class _Entry(pydantic.BaseModel):
 
     @pydantic.model_validator(mode="after")
     def _one_window(self) -> _Entry:
-        if self.start_s is not None and self.start_ns is not None:
-            raise ValueError("give start_s (seconds from the bag start) or start_ns (ROS time), not both")
-        if self.end_s is not None and self.end_ns is not None:
-            raise ValueError("give end_s (seconds from the bag start) or end_ns (ROS time), not both")
-        for start, end in ((self.start_s, self.end_s), (self.start_ns, self.end_ns)):
-            if start is not None and end is not None and end <= start:
-                raise ValueError(f"the window ends ({end}) before it starts ({start})")
+        clash = _window_clash(self)
+        if clash is not None:
+            raise clash.error()
         return self
 
     def window(self) -> TimeWindow:
@@ -152,17 +195,26 @@ def _csv_model(text: str, source: str) -> tuple[list[_Entry], list[int]]:
         try:
             entries.append(_Entry.model_validate(data))
         except pydantic.ValidationError as err:
-            first = primary_error(err)
-            column = str(first["loc"][0]) if first["loc"] else None
-            raise ManifestError(
-                f"{first['msg']}" + (f" (cell {data.get(column)!r})" if column in data else ""),
-                file=source,
-                row=row,
-                column=column,
-                fix="fix the cell; start_s/end_s are seconds from the bag's first message, uri is required.",
-            ) from err
+            raise _csv_invalid(err, data, source, row) from err
         rows.append(row)
     return entries, rows
+
+
+def _csv_invalid(err: pydantic.ValidationError, data: dict[str, Any], source: str, row: int) -> ManifestError:
+    """The first problem of a CSV row, at its column; a clash of two keys at the later of their columns."""
+    first = primary_error(err)
+    clash = _Clash.of(first)
+    if clash is not None:  # the later column, as a YAML manifest names the later line
+        column = max(clash.keys, key=list(data).index)
+        return ManifestError(clash.what, file=source, row=row, column=column, fix=clash.fix)
+    cell = str(first["loc"][0]) if first["loc"] else None
+    return ManifestError(
+        f"{first['msg']}" + (f" (cell {data.get(cell)!r})" if cell in data else ""),
+        file=source,
+        row=row,
+        column=cell,
+        fix="fix the cell; start_s/end_s are seconds from the bag's first message, uri is required.",
+    )
 
 
 def _yaml_model(text: str, source: str) -> _Manifest:
@@ -175,20 +227,37 @@ def _yaml_model(text: str, source: str) -> _Manifest:
             "metadata, start_s, end_s).",
         )
     try:
-        model = _Manifest.model_validate(parsed.data)
+        return _Manifest.model_validate(parsed.data)
     except pydantic.ValidationError as err:
-        first = primary_error(err)
-        loc = tuple(first["loc"])
-        problem = explain_validation(err, parsed, _Manifest, _FORMAT)
-        # a misspelt key gets the nearest one ("did you mean 'uri'?")
-        raise ManifestError(
-            f"{problem.field or 'top level'}: {problem.what}",
-            file=source,
-            entry=_entry_of(loc),
-            line=problem.line,
-            fix=_NOT_JSON_FIX if first["type"] == "invalid-json-value" else problem.fix,
-        ) from err
-    return model
+        raise _yaml_invalid(err, parsed, source) from err
+
+
+def _yaml_invalid(err: pydantic.ValidationError, parsed: YamlSource, source: str) -> ManifestError:
+    """The first problem of a YAML manifest, on its line; a problem inside ``bags[i]`` names the entry
+    once (``bags[0]: line 3: start_s: ...``) and a clash of two keys the later of their lines."""
+    first = primary_error(err)
+    loc = tuple(first["loc"])
+    entry = _entry_of(loc)
+    clash = _Clash.of(first)
+    if clash is not None and entry is not None:
+        lines = sorted((line, key) for key in clash.keys if (line := parsed.line_of(("bags", entry, key))))
+        on = ", ".join(f"{key} on line {line}" for line, key in lines)
+        line = lines[-1][0] if lines else parsed.line_of(("bags", entry))
+        return ManifestError(
+            f"{clash.what}: {on}" if on else clash.what, file=source, entry=entry, line=line, fix=clash.fix
+        )
+    problem = explain_validation(err, parsed, _Manifest, _FORMAT)
+    field = problem.field or "top level"
+    if entry is not None:  # the error names the entry itself
+        field = field.removeprefix(f"bags[{entry}]").removeprefix(".")
+    # a misspelt key gets the nearest one ("did you mean 'uri'?")
+    return ManifestError(
+        f"{field}: {problem.what}" if field else problem.what,
+        file=source,
+        entry=entry,
+        line=problem.line,
+        fix=_NOT_JSON_FIX if first["type"] == "invalid-json-value" else problem.fix,
+    )
 
 
 def _parse_yaml(text: str, source: str) -> YamlSource:

@@ -148,6 +148,8 @@ def test_an_append_planned_before_another_run_appended_is_refused_and_its_rerun_
 
 
 def test_an_append_with_other_encoder_settings_is_refused_before_anything_converts(tmp_path: Path) -> None:
+    """Other settings of the dataset's codec, or another codec: AV1 onto an H.264 dataset names the codec
+    first (the main difference, not its crf), then the pixel format and GOP."""
     bag, manifest, out = _appended_once(tmp_path)
     write_episode_bag(bag.parent / "new", "mcap", SPEC)
     manifest.write_text(f"bags:\n  - uri: {bag}\n  - uri: {bag.parent / 'new'}\n")
@@ -157,6 +159,19 @@ def test_an_append_with_other_encoder_settings_is_refused_before_anything_conver
         match=r"observation\.images\.\w+ encoder: video\.crf 18 -> 28.*nothing was converted",
     ):
         plan_run(config)
+    # another codec (the dataset is H.264; LeRobot's default, --codec lerobot-default, is AV1): named first
+    av1 = {"codec": "libsvtav1", "crf": 30, "preset": 12, "pix_fmt": "yuv420p10le", "g": 4}
+    av1_config = config.model_copy(update={"encoder": av1})
+    with pytest.raises(DatasetWriteError) as refused:
+        plan_run(av1_config)
+    camera = (
+        "video.codec 'h264' -> 'av1', video.pix_fmt 'yuv420p' -> 'yuv420p10le', video.g 2 -> 4, video.crf 18 -> 30, "
+        "video.preset 'ultrafast' -> 12"
+    )
+    assert (
+        f"(observation.images.front encoder: {camera}; observation.images.wrist encoder: {camera}); nothing was "
+        "converted" in str(refused.value)
+    )
     assert not (out.parent / "ds.staging").exists()  # nothing converted
 
 

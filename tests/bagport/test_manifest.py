@@ -59,7 +59,7 @@ def test_fsspec_uris(tmp_path: Path) -> None:
         ),
         pytest.param(
             "bags:\n  - url: a.mcap\n",
-            r"line 2: bags\[0\]\.url: unknown field.*Fix: did you mean 'uri'",
+            r"bags\[0\]: line 2: url: unknown field.*Fix: did you mean 'uri'",
             id="typo-uri",
         ),
         pytest.param("bags:\n  - {uri: a.mcap}\n  - {url: b.mcap}\n", r"bags\[1\].*line 3", id="entry-field"),
@@ -71,7 +71,7 @@ def test_fsspec_uris(tmp_path: Path) -> None:
         ),
         pytest.param(
             "bags:\n  - {uri: a.mcap, start_s: 4, end_s: 2}\n",
-            r"ends \(2.0\) before it starts",
+            r"ends \(end_s 2.0\) at or before it starts \(start_s 4.0\)",
             id="backwards",
         ),
         pytest.param(
@@ -79,7 +79,7 @@ def test_fsspec_uris(tmp_path: Path) -> None:
         ),
         pytest.param(
             "bags:\n  - uri: a.mcap\n    metadata: {robot_id: arm-1, raw: !!binary aGk=}\n",
-            r"bags\[0\].*line 3: bags\[0\]\.metadata\.raw: .*not a valid JSON value.*Fix: .*JSON values",
+            r"bags\[0\]: line 3: metadata\.raw: .*not a valid JSON value.*Fix: .*JSON values",
             id="metadata-not-json",
         ),
     ],
@@ -88,6 +88,45 @@ def test_manifest_errors_name_the_entry(tmp_path: Path, text: str, match: str) -
     _touch(tmp_path / "a.mcap")
     with pytest.raises(ManifestError, match=match):
         parse_manifest(text, "m.yaml", base_dir=str(tmp_path))
+
+
+@pytest.mark.parametrize(
+    ("text", "where", "message"),
+    [
+        pytest.param(
+            "bags:\n  - uri: a.mcap\n    start_s: 1\n    start_ns: 5\n",
+            (0, 4),
+            "m.yaml, bags[0]: line 4: gives both start_s (seconds from the bag's first message) and start_ns "
+            "(ROS time): start_s on line 3, start_ns on line 4 Fix: keep one of the two: remove start_s or start_ns.",
+            id="two-starts",
+        ),
+        pytest.param(
+            "bags:\n  - uri: a.mcap\n  - uri: a.mcap\n    end_ns: 5\n    task: t\n    end_s: 1\n",
+            (1, 6),
+            "m.yaml, bags[1]: line 6: gives both end_s (seconds from the bag's first message) and end_ns "
+            "(ROS time): end_ns on line 4, end_s on line 6 Fix: keep one of the two: remove end_s or end_ns.",
+            id="two-ends-later-first",
+        ),
+        pytest.param(
+            "bags:\n  - uri: a.mcap\n    start_ns: 9\n    end_ns: 9\n",
+            (0, 4),
+            "m.yaml, bags[0]: line 4: the window ends (end_ns 9) at or before it starts (start_ns 9): start_ns on "
+            "line 3, end_ns on line 4 Fix: give an end_ns greater than start_ns, or leave one of them out (the "
+            "bag's start or end).",
+            id="empty-window",
+        ),
+    ],
+)
+def test_two_keys_that_clash_name_the_entry_once_and_the_later_line(
+    tmp_path: Path, text: str, where: tuple[int, int], message: str
+) -> None:
+    """Both clocks for one end, or an end at or before the start: the error names the entry once, points at
+    the later of the two keys (both lines given) and says which key to keep, not the manifest's format."""
+    _touch(tmp_path / "a.mcap")
+    with pytest.raises(ManifestError) as caught:
+        parse_manifest(text, "m.yaml", base_dir=str(tmp_path))
+    assert str(caught.value) == message
+    assert (caught.value.entry, caught.value.line) == where
 
 
 def test_metadata_dates_are_read_as_text(tmp_path: Path) -> None:

@@ -58,9 +58,15 @@ def test_columns_become_entries_and_metadata(tmp_path: Path) -> None:
         ),
         pytest.param(
             "uri,start_s,end_s\nbags/a.mcap,5,3\n",
-            "m.csv, row 2: Value error, the window ends (3.0) before it starts (5.0) Fix: fix the cell; "
-            "start_s/end_s are seconds from the bag's first message, uri is required.",
+            "m.csv, row 2 (column end_s): the window ends (end_s 3.0) at or before it starts (start_s 5.0) Fix: "
+            "give an end_s greater than start_s, or leave one of them out (the bag's start or end).",
             id="window",
+        ),
+        pytest.param(
+            "uri,start_ns,task,start_s\nbags/a.mcap,5,t,1\n",
+            "m.csv, row 2 (column start_s): gives both start_s (seconds from the bag's first message) and start_ns "
+            "(ROS time) Fix: keep one of the two: remove start_s or start_ns.",
+            id="two-starts",
         ),
         pytest.param(
             "path,robot_id\nbags/a.mcap,arm-1\n",

@@ -16,6 +16,7 @@ from bagport.errors import BagportError
 from bagport.synth import EpisodeSpec, write_episode_bag
 from flows.cli import build_parser, main
 from flows.cli_config import (
+    COMMAND_LINE_ONLY,
     PRESETS,
     add_config_options,
     config_options,
@@ -133,6 +134,47 @@ def test_a_config_that_is_not_a_mapping_is_one_paragraph(tmp_path: Path) -> None
         BagportError, match=r"^--config .*run\.yaml: not a YAML mapping of run options.*Fix: "
     ):
         _config(["--config", str(run)])
+
+
+def test_the_command_line_only_options_are_the_convert_options_with_no_field() -> None:
+    """COMMAND_LINE_ONLY lists every ``convert`` option that is not a run option, under the key one would
+    write for it, and no other."""
+    keys = {option.named or name for name, _, option in config_options()}
+    others = {
+        dest: action.option_strings[-1]
+        for dest, action in _convert_actions().items()
+        if dest not in keys and dest != "help"
+    }
+    assert others == COMMAND_LINE_ONLY
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        pytest.param(
+            "output: o\npush_to_hub: true\n",
+            "--config {run}, line 2: push_to_hub is a command-line option only (about the command, not the run: "
+            "a run file has no such key). Fix: remove it from the file and give --push-to-hub on the command line.",
+            id="push_to_hub",
+        ),
+        pytest.param(
+            "quiet: true\noutput: o\nfull_provenance: true\n",
+            "--config {run}: quiet (line 1) and full_provenance (line 3) are command-line options only (about the "
+            "command, not the run: a run file has no such key). Fix: remove them from the file and give --quiet "
+            "--full-provenance on the command line.",
+            id="two",
+        ),
+    ],
+)
+def test_a_command_line_only_option_in_the_config_file_names_its_flag(
+    tmp_path: Path, text: str, message: str
+) -> None:
+    """Not pydantic's bare 'Extra inputs are not permitted': the key's line and the flag to give instead."""
+    run = tmp_path / "run.yaml"
+    run.write_text(text)
+    with pytest.raises(BagportError) as caught:
+        _config(["--config", str(run)])
+    assert str(caught.value) == message.format(run=run)
 
 
 @pytest.mark.slow

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from bagport.video.encode import ClipInfo, StreamingEncoder
+from bagport.video.encode import ClipInfo, StreamingEncoder, stream_codec
 from bagport.video.fidelity import ClipFidelity, FidelityParams, FidelityRecorder, FramePair, compare_clip
 from bagport.video.remux import ClipPlacement, VideoStreamInfo, concat_clips, iter_frames, probe_video
 from bagport.video.settings import DEFAULT_ENCODER, EncoderSettings
@@ -22,4 +22,5 @@ __all__ = [
     "concat_clips",
     "iter_frames",
     "probe_video",
+    "stream_codec",
 ]

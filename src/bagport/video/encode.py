@@ -20,7 +20,7 @@ from bagport.errors import EncoderSettingsError, VideoError
 from bagport.video.depth import DEPTH_PIX_FMT
 from bagport.video.settings import EncoderSettings
 
-__all__ = ["ClipInfo", "StreamingEncoder", "check_encoder"]
+__all__ = ["ClipInfo", "StreamingEncoder", "check_encoder", "stream_codec"]
 
 
 @dataclass(frozen=True, slots=True)
@@ -153,6 +153,16 @@ def _quiet(options: dict[str, str]) -> dict[str, str]:
     if "x265-params" in options and "log-level" not in options["x265-params"]:
         return {**options, "x265-params": options["x265-params"] + ":log-level=error"}
     return options
+
+
+def stream_codec(encoder: str) -> str | None:
+    """The codec of the streams ``encoder`` writes, as decoders and ``info.json``'s ``video.codec`` name it
+    (``libsvtav1`` -> ``av1``, ``libx264`` -> ``h264``), without encoding anything; ``None`` for an encoder
+    this PyAV build lacks (starting it says so)."""
+    try:
+        return str(av.Codec(encoder, "w").canonical_name)
+    except ValueError:  # av's UnknownCodecError
+        return None
 
 
 _CODEC_NAMES: dict[str, str] = {}

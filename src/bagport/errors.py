@@ -112,6 +112,7 @@ class BagReadError(BagportError):
     def __init__(self, what: str, *, uri: str, topic: str | None = None, fix: str = "") -> None:
         self.uri = uri
         self.topic = topic
+        self.fix = fix
         super().__init__(f"{uri}: {what}{_where(topic=topic)}" + (f" Fix: {fix}" if fix else ""))
 
 

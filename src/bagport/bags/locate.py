@@ -4,7 +4,9 @@ rosbags says *that* a read failed ("Chunk checksum mismatch.", "database disk im
 not where. After a failure, these walk the damaged file once more with checks of their own: MCAP
 framing (:mod:`bagport.bags.mcap_layout`), then chunks against their CRC-32 and record layout, SQLite
 through its integrity check (page -> byte offset), ROS 1 records and chunks (layout, decompression,
-sizes). Each returns ``None`` when it finds nothing wrong; the error is then reported without a place.
+sizes); a file cut short is said to be one first (:mod:`~bagport.bags.mcap_tail`,
+:mod:`~bagport.bags.sqlite_tail`, :mod:`~bagport.bags.ros1_tail`). Each returns ``None`` when it finds
+nothing wrong; the error is then reported without a place.
 Only run after a failure: each reads the whole file (a record or chunk at a time; memory stays bounded).
 """
 
@@ -31,6 +33,7 @@ from bagport.bags.mcap_tail import FIX as CUT_FIX
 from bagport.bags.mcap_tail import mcap_cut
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
+from bagport.bags.ros1_tail import ros1_cut
 from bagport.bags.sqlite_tail import sqlite_cut
 
 __all__ = ["Damage", "locate_damage"]
@@ -364,6 +367,9 @@ def _ros1_topic(payload: bytes, fields: dict[str, bytes]) -> str:
 
 
 def _locate_ros1(path: Path | RemotePath) -> Damage | None:
+    cut = ros1_cut(path)
+    if cut is not None:
+        return Damage(path.name, None, cut.describe(), fix=cut.fix())
     size = path.stat().st_size
     conns: dict[int, str] = {}
     with path.open("rb") as handle:

@@ -75,11 +75,14 @@ class _BadRecordError(Exception):
     """A record that does not parse; ``args[0]`` says why."""
 
 
-def locate_damage(storage: Storage, files: list[Path | RemotePath]) -> Damage | None:
-    """The first damage found in the bag's data files, or ``None`` (never raises on damage)."""
-    locate = {Storage.MCAP: _locate_mcap, Storage.SQLITE3: _locate_sqlite, Storage.ROS1: _locate_ros1}[
-        storage
-    ]
+def locate_damage(storage: Storage, files: list[Path | RemotePath], *, metadata_yaml: bool) -> Damage | None:
+    """The first damage found in the bag's data files, or ``None`` (never raises on damage).
+    ``metadata_yaml``: the bag is a folder with one (what to convert after a SQLite salvage depends on it)."""
+    locate: Callable[[Path | RemotePath], Damage | None] = {
+        Storage.MCAP: _locate_mcap,
+        Storage.SQLITE3: lambda file: _locate_sqlite(file, metadata_yaml=metadata_yaml),
+        Storage.ROS1: _locate_ros1,
+    }[storage]
     for file in files:
         try:
             found = locate(file)
@@ -169,12 +172,12 @@ def _read_only(uri: str) -> sqlite3.Connection:
     return db
 
 
-def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
+def _locate_sqlite(path: Path | RemotePath, *, metadata_yaml: bool) -> Damage | None:
     if isinstance(path, RemotePath):
         return None  # SQLite bags are downloaded before they are read; a remote path is not opened here
     cut = sqlite_cut(path)
     if cut is not None:
-        return Damage(path.name, None, cut.describe(), fix=cut.fix())
+        return Damage(path.name, None, cut.describe(), fix=cut.fix(metadata_yaml=metadata_yaml))
     uri = f"file:{quote(str(path.resolve()))}?mode=ro&immutable=1"
     try:
         with contextlib.closing(_read_only(uri)) as db:

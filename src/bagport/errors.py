@@ -8,6 +8,8 @@ retries; everything else fails fast.
 
 from __future__ import annotations
 
+import os
+
 __all__ = [
     "AlignmentError",
     "BagReadError",
@@ -112,6 +114,7 @@ class BagReadError(BagportError):
     def __init__(self, what: str, *, uri: str, topic: str | None = None, fix: str = "") -> None:
         self.uri = uri
         self.topic = topic
+        self.fix = fix
         super().__init__(f"{uri}: {what}{_where(topic=topic)}" + (f" Fix: {fix}" if fix else ""))
 
 
@@ -211,7 +214,17 @@ class QualityError(BagportError):
 
 
 class ValidationError(BagportError):
-    """A written dataset violates a LeRobot v3.0 invariant or does not load."""
+    """A written dataset violates a LeRobot v3.0 invariant or does not load: the file (or folder) concerned,
+    what is wrong and the fix."""
+
+    def __init__(self, what: str, *, path: str | os.PathLike[str] | None, fix: str) -> None:
+        self.what = what
+        self.path = os.fspath(path) if path is not None else None
+        """The file or folder the finding is about (``None``: the installation, not the dataset)."""
+        self.fix = fix
+        prefix = f"{self.path}: " if self.path is not None else ""
+        stop = "" if what.endswith(".") else "."
+        super().__init__(f"{prefix}{what}{stop} Fix: {fix}")
 
 
 class PushError(BagportError):

@@ -8,8 +8,9 @@ from pathlib import Path
 import pytest
 from mcap.writer import Writer
 
+from bagport.dataset import write_dataset
 from flows.cli import main
-from tests.helpers import realbag
+from tests.helpers import realbag, staged_episodes
 
 
 def test_inspect_prints_what_ros2_bag_info_prints(capsys: pytest.CaptureFixture[str]) -> None:
@@ -90,3 +91,21 @@ def test_validate_exits_nonzero_with_the_violation(
     assert main(["validate", str(root)]) == 2
     err = capsys.readouterr().err
     assert "meta/info.json: missing fields" in err
+
+
+def test_validate_of_a_dataset_whose_video_was_deleted_says_how_to_fix_it(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The audit's case: `...file-000.mp4: missing, but the run record ... lists it` ended there, no fix."""
+    root = tmp_path / "ds"
+    write_dataset(staged_episodes(tmp_path, (0.5,)), str(root), robot_type="r")
+    video = root / "videos/observation.images.wrist/chunk-000/file-000.mp4"
+    video.unlink()
+    assert main(["validate", str(root)]) == 2
+    err = capsys.readouterr().err
+    assert (
+        f"{video}: missing, but the run record meta/provenance/run.json lists it. Fix: restore the file"
+        in err
+    )
+    assert "convert the dataset's bags again into a new --output (or --overwrite this one)." in err
+    assert "Traceback" not in err

@@ -20,7 +20,7 @@ from bagport.bags.locate import locate_damage
 from bagport.bags.mcap_layout import FIX as MCAP_FIX
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
-from bagport.bags.sqlite_tail import SALVAGE
+from bagport.bags.sqlite_tail import salvage
 from bagport.bags.typeload import one_line
 from bagport.errors import BagReadError
 
@@ -49,17 +49,22 @@ STORAGE_ERRORS = (
 
 _REINDEX_SHORT = "reindex it (`ros2 bag reindex` / `rosbag reindex`)."
 _REINDEX = "reindex the bag (`rosbag reindex` for ROS 1, `ros2 bag reindex` for rosbag2)."
-_FIXES = {
-    Storage.MCAP: MCAP_FIX,
-    Storage.SQLITE3: f"copy the bag again from the robot or a backup; without one, {SALVAGE}.",
-    Storage.ROS1: "copy the bag again from the robot or a backup; if only its index is damaged "
-    "(the messages are intact), `rosbag reindex` rebuilds it.",
-}
+_ROS1_FIX = (
+    "copy the bag again from the robot or a backup; if only its index is damaged (the messages are intact), "
+    "`rosbag reindex` rebuilds it."
+)
 _NOT_INDEXED = re.compile(r"\b(not indexed|index(es)? (is|are) (missing|damaged|corrupt))\b", re.IGNORECASE)
 """The reader's words for a missing or broken index, which a reindex rebuilds (never for MCAP: its
 summary holds the index, and `ros2 bag reindex` rewrites only metadata.yaml)."""
 
 BagFile = Path | RemotePath
+
+
+def _fix(storage: Storage, *, metadata_yaml: bool) -> str:
+    """The storage's usual fix for damage; ``metadata_yaml``: the bag is a folder with one."""
+    if storage is Storage.SQLITE3:
+        return f"copy the bag again from the robot or a backup; without one, {salvage(metadata_yaml=metadata_yaml)}."
+    return MCAP_FIX if storage is Storage.MCAP else _ROS1_FIX
 
 
 def _one_line(err: BaseException) -> str:
@@ -78,15 +83,17 @@ def damaged_bag(
     storage: Storage,
     files: Iterable[BagFile],
     action: str,
+    metadata_yaml: bool,
     last: tuple[str, int] | None = None,
 ) -> BagReadError:
     """The error for a bag whose ``action`` ("cannot be opened", "reading failed") raised ``err``;
-    walks ``files`` to name the damaged record. ``last``: (topic, log_ns) of the last intact message.
+    walks ``files`` to name the damaged record. ``last``: (topic, log_ns) of the last intact message;
+    ``metadata_yaml``: the bag is a folder with one (the fix for a SQLite file depends on it).
 
     The library's words appear only when bagport finds nothing itself ("the reader said: ..."): where
     the damage is located, they repeat it less precisely (or mislead, as a damaged length's
     ``OverflowError`` does)."""
-    damage = locate_damage(storage, list(files))
+    damage = locate_damage(storage, list(files), metadata_yaml=metadata_yaml)
     if damage is not None:
         what = f"{action}: {damage.describe()}"
     else:
@@ -98,21 +105,22 @@ def damaged_bag(
     if damage is not None and damage.fix is not None:  # a file cut short is not a changed one
         return BagReadError(what, uri=uri, fix=damage.fix)
     index_only = damage is None and storage is not Storage.MCAP and _NOT_INDEXED.search(str(err)) is not None
-    return BagReadError(what, uri=uri, topic=topic, fix=_REINDEX if index_only else _FIXES[storage])
+    fix = _REINDEX if index_only else _fix(storage, metadata_yaml=metadata_yaml)
+    return BagReadError(what, uri=uri, topic=topic, fix=fix)
 
 
 def short_read(
-    what: str, *, uri: str, topic: str, storage: Storage, files: Iterable[BagFile]
+    what: str, *, uri: str, topic: str, storage: Storage, files: Iterable[BagFile], metadata_yaml: bool
 ) -> BagReadError:
     """Fewer messages than the index promises: damage when the files show some, else a truncated bag
     or a stale index."""
-    damage = locate_damage(storage, list(files))
+    damage = locate_damage(storage, list(files), metadata_yaml=metadata_yaml)
     if damage is not None:
         return BagReadError(
             f"{what}; damage found in {damage.describe()}",
             uri=uri,
             topic=topic,
-            fix=damage.fix or _FIXES[storage],
+            fix=damage.fix or _fix(storage, metadata_yaml=metadata_yaml),
         )
     return BagReadError(
         what, uri=uri, topic=topic, fix=f"the bag is truncated or its index is stale: {_REINDEX_SHORT}"
@@ -120,7 +128,12 @@ def short_read(
 
 
 def checked_records(
-    records: Iterable[tuple[Any, Any, Any]], *, uri: str, storage: Storage, files: Iterable[BagFile]
+    records: Iterable[tuple[Any, Any, Any]],
+    *,
+    uri: str,
+    storage: Storage,
+    files: Iterable[BagFile],
+    metadata_yaml: bool,
 ) -> Iterator[tuple[Any, int, bytes | memoryview]]:
     """rosbags' ``(connection, log_ns, raw)`` records, each checked for its types (a damaged SQLite
     row can hold an integer where the payload belongs); any storage failure becomes :func:`damaged_bag`."""
@@ -133,7 +146,13 @@ def checked_records(
             return
         except STORAGE_ERRORS as err:
             raise damaged_bag(
-                err, uri=uri, storage=storage, files=files, action="reading failed", last=last
+                err,
+                uri=uri,
+                storage=storage,
+                files=files,
+                action="reading failed",
+                metadata_yaml=metadata_yaml,
+                last=last,
             ) from err
         conn, log_ns, raw = record
         if not isinstance(log_ns, int) or not isinstance(raw, bytes | memoryview):
@@ -144,7 +163,7 @@ def checked_records(
                 f"a {type(value).__name__}",
                 uri=uri,
                 topic=conn.topic,
-                fix=_FIXES[storage],
+                fix=_fix(storage, metadata_yaml=metadata_yaml),
             )
         last = (conn.topic, log_ns)
         yield conn, log_ns, raw

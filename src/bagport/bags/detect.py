@@ -9,7 +9,7 @@ from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
-__all__ = ["MCAP_MAGIC", "detect_storage", "storage_by_content"]
+__all__ = ["MCAP_MAGIC", "ROS1_MAGIC", "detect_storage", "storage_by_content"]
 
 ROS1_MAGIC = b"#ROSBAG V2.0"
 MCAP_MAGIC = b"\x89MCAP0\r\n"

@@ -44,6 +44,8 @@ class ReadPlan:
     """Payloads are zstd-compressed one by one and rosbags does not know (metadata bypassed)."""
     custom_data: dict[str, str] = field(default_factory=dict)
     """``metadata.yaml``'s ``custom_data`` (``{}`` without one, or when it is not a mapping)."""
+    metadata_yaml: bool = False
+    """The bag is a folder with a ``metadata.yaml`` (read or bypassed): it promises what the files hold."""
 
 
 def _natural_key(path: BagPath) -> list[Any]:
@@ -148,7 +150,7 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
             folder = _alias(path, "bag", scratch) if path.suffix == ".bag" else path
             return ReadPlan(
                 [folder], [*present, path / "metadata.yaml"], present, _ignoring(ignored, storage),
-                custom_data=_custom_data(metadata),
+                custom_data=_custom_data(metadata), metadata_yaml=True,
             )  # fmt: skip
         mode = str(metadata.get("compression_mode") or "").lower()
         if mode == "file":
@@ -166,6 +168,7 @@ def plan_reads(path: BagPath, storage: Storage, scratch: Callable[[], Path], uri
             [*_ignoring(ignored, storage), warning],
             message_compression=mode == "message",
             custom_data=_custom_data(metadata),
+            metadata_yaml=True,
         )
     usable, renamed = _usable(present, storage, uri)
     return ReadPlan(renamed.opened(usable, scratch), list(present), usable, renamed.warnings())

@@ -4,7 +4,9 @@ rosbags says *that* a read failed ("Chunk checksum mismatch.", "database disk im
 not where. After a failure, these walk the damaged file once more with checks of their own: MCAP
 framing (:mod:`bagport.bags.mcap_layout`), then chunks against their CRC-32 and record layout, SQLite
 through its integrity check (page -> byte offset), ROS 1 records and chunks (layout, decompression,
-sizes). Each returns ``None`` when it finds nothing wrong; the error is then reported without a place.
+sizes); a file cut short is said to be one first (:mod:`~bagport.bags.mcap_tail`,
+:mod:`~bagport.bags.sqlite_tail`, :mod:`~bagport.bags.ros1_tail`). Each returns ``None`` when it finds
+nothing wrong; the error is then reported without a place.
 Only run after a failure: each reads the whole file (a record or chunk at a time; memory stays bounded).
 """
 
@@ -31,6 +33,7 @@ from bagport.bags.mcap_tail import FIX as CUT_FIX
 from bagport.bags.mcap_tail import mcap_cut
 from bagport.bags.records import Storage
 from bagport.bags.remote import RemotePath
+from bagport.bags.ros1_tail import ros1_cut
 from bagport.bags.sqlite_tail import sqlite_cut
 
 __all__ = ["Damage", "locate_damage"]
@@ -72,11 +75,14 @@ class _BadRecordError(Exception):
     """A record that does not parse; ``args[0]`` says why."""
 
 
-def locate_damage(storage: Storage, files: list[Path | RemotePath]) -> Damage | None:
-    """The first damage found in the bag's data files, or ``None`` (never raises on damage)."""
-    locate = {Storage.MCAP: _locate_mcap, Storage.SQLITE3: _locate_sqlite, Storage.ROS1: _locate_ros1}[
-        storage
-    ]
+def locate_damage(storage: Storage, files: list[Path | RemotePath], *, metadata_yaml: bool) -> Damage | None:
+    """The first damage found in the bag's data files, or ``None`` (never raises on damage).
+    ``metadata_yaml``: the bag is a folder with one (what to convert after a SQLite salvage depends on it)."""
+    locate: Callable[[Path | RemotePath], Damage | None] = {
+        Storage.MCAP: _locate_mcap,
+        Storage.SQLITE3: lambda file: _locate_sqlite(file, metadata_yaml=metadata_yaml),
+        Storage.ROS1: _locate_ros1,
+    }[storage]
     for file in files:
         try:
             found = locate(file)
@@ -166,12 +172,12 @@ def _read_only(uri: str) -> sqlite3.Connection:
     return db
 
 
-def _locate_sqlite(path: Path | RemotePath) -> Damage | None:
+def _locate_sqlite(path: Path | RemotePath, *, metadata_yaml: bool) -> Damage | None:
     if isinstance(path, RemotePath):
         return None  # SQLite bags are downloaded before they are read; a remote path is not opened here
     cut = sqlite_cut(path)
     if cut is not None:
-        return Damage(path.name, None, cut.describe(), fix=cut.fix())
+        return Damage(path.name, None, cut.describe(), fix=cut.fix(metadata_yaml=metadata_yaml))
     uri = f"file:{quote(str(path.resolve()))}?mode=ro&immutable=1"
     try:
         with contextlib.closing(_read_only(uri)) as db:
@@ -364,6 +370,9 @@ def _ros1_topic(payload: bytes, fields: dict[str, bytes]) -> str:
 
 
 def _locate_ros1(path: Path | RemotePath) -> Damage | None:
+    cut = ros1_cut(path)
+    if cut is not None:
+        return Damage(path.name, None, cut.describe(), fix=cut.fix())
     size = path.stat().st_size
     conns: dict[int, str] = {}
     with path.open("rb") as handle:

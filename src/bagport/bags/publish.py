@@ -43,8 +43,13 @@ def mcap_publish_times_ns(
                         (int(message.log_time), int(message.publish_time))
                     )
     except (KeyError, IndexError, struct.error) as err:  # the mcap library on a damaged summary or record
-        raise damaged_bag(
-            err, uri=uri, storage=Storage.MCAP, files=files, action="its publish times cannot be read"
+        raise damaged_bag(  # MCAP: its fixes do not depend on a metadata.yaml
+            err,
+            uri=uri,
+            storage=Storage.MCAP,
+            files=files,
+            action="its publish times cannot be read",
+            metadata_yaml=False,
         ) from err
     except (McapError, OSError, ValueError) as err:
         raise BagReadError(

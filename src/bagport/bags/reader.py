@@ -75,6 +75,7 @@ class RosbagsReader:
         self._decompress = plan.message_compression
         self._mcap_files = plan.data_files if storage is Storage.MCAP else []
         self._data_files = plan.data_files
+        self._metadata_yaml = plan.metadata_yaml
         self._lacking = self._open(plan, storage, msg_definitions)
         self._info = self._bag_info(storage, plan)
         self._layout = HeaderLayout.ROS1 if storage is Storage.ROS1 else HeaderLayout.CDR
@@ -117,7 +118,12 @@ class RosbagsReader:
             raise
         except STORAGE_ERRORS as err:
             error = damaged_bag(
-                err, uri=uri, storage=storage, files=plan.data_files, action="cannot be opened"
+                err,
+                uri=uri,
+                storage=storage,
+                files=plan.data_files,
+                action="cannot be opened",
+                metadata_yaml=plan.metadata_yaml,
             )
             self.close()
             raise error from err
@@ -240,6 +246,7 @@ class RosbagsReader:
             uri=self._uri,
             storage=self._info.storage,
             files=self._data_files,
+            metadata_yaml=self._metadata_yaml,
         )
         for conn, log_ns, raw in records:
             topic, msgtype = names[conn.topic, conn.msgtype]
@@ -272,7 +279,14 @@ class RosbagsReader:
             return counts
         except (OSError, ValueError, KeyError, IndexError, struct.error) as err:
             storage, files, action = self._info.storage, self._data_files, "its message index cannot be read"
-            raise damaged_bag(err, uri=self._uri, storage=storage, files=files, action=action) from err
+            raise damaged_bag(
+                err,
+                uri=self._uri,
+                storage=storage,
+                files=files,
+                action=action,
+                metadata_yaml=self._metadata_yaml,
+            ) from err
 
     def _check_counts(self, yielded: dict[str, int], promises: Mapping[str, int], window: str) -> None:
         """Fewer messages than the index promises is an error naming the topic, never a short dataset."""
@@ -281,7 +295,12 @@ class RosbagsReader:
             if count < promised:
                 what = f"yielded {count} messages on {topic}{window}, its index promises {promised}"
                 raise short_read(
-                    what, uri=self._uri, topic=topic, storage=self._info.storage, files=self._data_files
+                    what,
+                    uri=self._uri,
+                    topic=topic,
+                    storage=self._info.storage,
+                    files=self._data_files,
+                    metadata_yaml=self._metadata_yaml,
                 )
 
     def publish_times_ns(self, topics: Sequence[str]) -> dict[str, tuple[Int64Array, Int64Array]]:

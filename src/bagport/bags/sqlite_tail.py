@@ -14,19 +14,28 @@ from pathlib import Path
 
 from bagport.bags.remote import RemotePath
 
-__all__ = ["HEADER_MAGIC", "SALVAGE", "SqliteCut", "sqlite_cut"]
+__all__ = ["HEADER_MAGIC", "SALVAGE_COMMAND", "SqliteCut", "salvage", "sqlite_cut"]
 
 HEADER_MAGIC = b"SQLite format 3\x00"
 _HEADER_BYTES = 100
 _PAGE_SIZE = struct.Struct(">H")  # at byte 16; 1 means 65,536
 _COUNTER = struct.Struct(">I")  # the change counter at byte 24, the page count at 28, valid-for at 92
 
-SALVAGE = (
-    "`sqlite3 FILE .dump | sed 's/^ROLLBACK; -- due to errors$/COMMIT;/' | sqlite3 FIXED.db3` keeps the rows "
-    "SQLite can still read; convert FIXED.db3 on its own (the folder's metadata.yaml promises the lost messages)"
-)
+SALVAGE_COMMAND = "sqlite3 FILE .dump | sed 's/^ROLLBACK; -- due to errors$/COMMIT;/' | sqlite3 FIXED.db3"
 """How to salvage the readable rows of a damaged or cut ``.db3`` with the sqlite3 command-line tool (``.dump``
 ends a damaged database with ``ROLLBACK``, which would undo the copy; ``.recover`` is not in every build)."""
+
+
+def salvage(*, metadata_yaml: bool) -> str:
+    """The salvage fix, and what to convert after it: in a folder with a ``metadata.yaml``, the salvaged file on
+    its own (the metadata promises the messages lost); a bare ``.db3``, or a folder without one, has no promise
+    to break."""
+    then = (
+        "convert FIXED.db3 on its own (the folder's metadata.yaml promises the lost messages)"
+        if metadata_yaml
+        else "convert FIXED.db3 instead"
+    )
+    return f"`{SALVAGE_COMMAND}` keeps the rows SQLite can still read; {then}"
 
 
 @dataclass(frozen=True, slots=True)
@@ -56,10 +65,11 @@ class SqliteCut:
             f"pages of {self.page_size} bytes ({self.expected} bytes): {why}; {whole} page(s) before are whole"
         )
 
-    def fix(self) -> str:
-        """What to do: copy it again (its whole size, when known), or salvage the rows that can be read."""
+    def fix(self, *, metadata_yaml: bool) -> str:
+        """What to do: copy it again (its whole size, when known), or salvage the rows that can be read
+        (``metadata_yaml``: the bag is a folder with one, see :func:`salvage`)."""
         size = f" (the whole file is {self.expected} bytes)" if self.expected is not None else ""
-        return f"copy the bag again from the robot or a backup{size}; without one, {SALVAGE}."
+        return f"copy the bag again from the robot or a backup{size}; without one, {salvage(metadata_yaml=metadata_yaml)}."
 
 
 def sqlite_cut(path: Path | RemotePath) -> SqliteCut | None:

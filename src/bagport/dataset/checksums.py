@@ -14,6 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from bagport.dataset.invariants import FILE_FIX
 from bagport.dataset.journal import file_sha256
 from bagport.dataset.layout import run_number
 from bagport.errors import ValidationError
@@ -63,18 +64,20 @@ def verify_checksums(root: Path) -> int:
     for rel, expected in files.items():
         path = root / rel
         if not path.is_file():
-            raise ValidationError(f"{path}: missing, but the run record {newest} lists it")
+            raise ValidationError(f"missing, but the run record {newest} lists it", path=path, fix=FILE_FIX)
         if file_sha256(path) != expected:
             raise ValidationError(
-                f"{path}: changed since bagport wrote it (its SHA-256 differs from the one in {newest}). "
-                "Fix: restore it from a backup, or convert the bags again."
+                f"changed since bagport wrote it (its SHA-256 differs from the one in {newest})",
+                path=path,
+                fix=FILE_FIX,
             )
     if files and record.get("files_complete", False):
         for folder in ("data", "videos"):
             for path in sorted((root / folder).rglob("*")):
                 if path.is_file() and path.relative_to(root).as_posix() not in files:
                     raise ValidationError(
-                        f"{path}: not written by bagport (not in the run record {newest}); LeRobot would "
-                        "read it. Fix: remove it, or run `bagport repair` if a run was interrupted."
+                        f"not written by bagport (not in the run record {newest}); LeRobot would read it",
+                        path=path,
+                        fix="remove it, or run `bagport repair` if a run was interrupted.",
                     )
     return len(files)

@@ -15,11 +15,21 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from bagport.dataset.layout import CODEBASE_VERSION, DEFAULT_FEATURES, INFO_PATH, STATS_PATH, TASKS_PATH
-from bagport.errors import ValidationError
+from bagport.errors import ValidationError, VideoError
 from bagport.stats import STAT_KEYS
 from bagport.video import probe_video
 
-__all__ = ["check_invariants"]
+__all__ = ["DATASET_FIX", "FILE_FIX", "REWRITE", "check_invariants"]
+
+REWRITE = "convert the dataset's bags again into a new --output (or --overwrite this one)"
+FILE_FIX = f"restore the file from a backup (or its object store's earlier version), or {REWRITE}."
+"""For a file missing, changed or damaged after bagport wrote it."""
+DATASET_FIX = f"restore the dataset from a backup, or {REWRITE}."
+"""For a dataset whose files disagree with each other or with LeRobot v3.0."""
+_V30_FIX = (
+    "convert a v2.1 dataset to v3.0 with LeRobot's convert_dataset_v21_to_v30 script (`--root DIR "
+    f"--push-to-hub=false`), or {REWRITE}."
+)
 
 _REQUIRED_INFO = (
     "codebase_version",
@@ -39,23 +49,29 @@ _REQUIRED_INFO = (
 _TIME_TOL_S = 1e-4
 
 
-def _fail(where: Path | str, what: str) -> ValidationError:
-    return ValidationError(f"{where}: {what}")
+def _fail(where: Path | str, what: str, fix: str = DATASET_FIX) -> ValidationError:
+    return ValidationError(what, path=where, fix=fix)
 
 
 def _load_info(root: Path) -> dict[str, Any]:
     path = root / INFO_PATH
     if not path.is_file():
-        raise _fail(path, "missing; this is not a LeRobot v3.0 dataset folder (pass the dataset root)")
+        raise _fail(
+            path,
+            "missing: this is not a LeRobot v3.0 dataset folder",
+            "give the dataset's root folder (the one holding meta/info.json), or restore info.json from a backup.",
+        )
     info: dict[str, Any] = json.loads(path.read_text())
     missing = [k for k in _REQUIRED_INFO if k not in info]
     if missing:
         raise _fail(path, f"missing fields {missing}")
     if info["codebase_version"] != CODEBASE_VERSION:
-        raise _fail(path, f"codebase_version is {info['codebase_version']!r}, expected {CODEBASE_VERSION!r}")
+        raise _fail(
+            path, f"codebase_version is {info['codebase_version']!r}, expected {CODEBASE_VERSION!r}", _V30_FIX
+        )
     for stale in ("total_chunks", "total_videos"):
         if stale in info:
-            raise _fail(path, f"has v2.1 field {stale!r}")
+            raise _fail(path, f"has v2.1 field {stale!r}", _V30_FIX)
     for key, feature in info["features"].items():
         if "/" in key or any("/" in str(n) for n in (feature.get("names") or [])):
             raise _fail(path, f"feature {key!r}: names must not contain '/'")
@@ -109,7 +125,9 @@ def _check_data(root: Path, info: dict[str, Any], episodes: list[Row]) -> None:
     for (chunk, file), group in _group(episodes, "data/chunk_index", "data/file_index").items():
         path = root / info["data_path"].format(chunk_index=chunk, file_index=file)
         if not path.is_file():
-            raise _fail(path, f"missing (referenced by episodes {[r['episode_index'] for r in group]})")
+            raise _fail(
+                path, f"missing (referenced by episodes {[r['episode_index'] for r in group]})", FILE_FIX
+            )
         table = _read_parquet(path)
         extra = set(table.column_names) - set(columns)
         absent = set(columns) - set(table.column_names)
@@ -150,8 +168,13 @@ def _check_videos(root: Path, info: dict[str, Any], episodes: list[Row]) -> None
         ).items():
             path = root / info["video_path"].format(video_key=key, chunk_index=chunk, file_index=file)
             if not path.is_file():
-                raise _fail(path, f"missing (referenced by episodes {[r['episode_index'] for r in group]})")
-            probed = probe_video(path)
+                raise _fail(
+                    path, f"missing (referenced by episodes {[r['episode_index'] for r in group]})", FILE_FIX
+                )
+            try:
+                probed = probe_video(path)
+            except VideoError as err:  # its cause is FFmpeg's own error
+                raise _fail(path, f"is not a readable video ({err.__cause__ or err})", FILE_FIX) from err
             vinfo = feature.get("info", {})
             if (probed.height, probed.width) != (vinfo.get("video.height"), vinfo.get("video.width")):
                 raise _fail(
@@ -168,7 +191,7 @@ def _check_videos(root: Path, info: dict[str, Any], episodes: list[Row]) -> None
 def _check_stats(root: Path, info: dict[str, Any]) -> None:
     path = root / STATS_PATH
     if not path.is_file():
-        raise _fail(path, "missing")
+        raise _fail(path, "missing", FILE_FIX)
     stats = json.loads(path.read_text())
     for key, feature in info["features"].items():
         if key not in stats:
@@ -196,9 +219,7 @@ def _read_parquet(path: Path) -> pa.Table:
         return pq.read_table(path)
     except (pa.ArrowException, OSError) as err:
         raise _fail(
-            path,
-            f"is not a readable parquet file ({err}). Fix: the file was damaged after it was written; convert "
-            "the bags again into a new --output (or --overwrite this one)",
+            path, f"is not a readable parquet file ({err}): it was damaged after it was written", FILE_FIX
         ) from err
 
 
@@ -207,13 +228,13 @@ def check_invariants(root: Path) -> dict[str, Any]:
     info = _load_info(root)
     tasks_path = root / TASKS_PATH
     if not tasks_path.is_file():
-        raise _fail(tasks_path, "missing")
+        raise _fail(tasks_path, "missing", FILE_FIX)
     tasks = _read_parquet(tasks_path).to_pandas()
     if list(tasks["task_index"]) != list(range(len(tasks))) or len(tasks) != info["total_tasks"]:
         raise _fail(tasks_path, f"task_index must be 0..{info['total_tasks'] - 1}")
     episode_files = sorted((root / "meta/episodes").glob("chunk-*/file-*.parquet"))
     if not episode_files:
-        raise _fail(root / "meta/episodes", "no episodes parquet")
+        raise _fail(root / "meta/episodes", "no episodes parquet", FILE_FIX)
     episodes: list[Row] = []
     for episode_file in episode_files:
         episodes.extend(_read_parquet(episode_file).to_pylist())

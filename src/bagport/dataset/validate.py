@@ -9,7 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bagport.dataset.checksums import verify_checksums
-from bagport.dataset.invariants import check_invariants
+from bagport.dataset.invariants import DATASET_FIX, check_invariants
 from bagport.dataset.repair import interrupted_write
 from bagport.errors import ValidationError
 
@@ -44,15 +44,18 @@ def validate_dataset(
     interrupted = interrupted_write(path)
     if interrupted is not None:
         raise ValidationError(
-            f"{path} needs repair: {interrupted}. Fix: run `bagport repair {path}` (or the same conversion "
-            "again), which finishes or undoes that write."
+            f"needs repair: {interrupted}",
+            path=path,
+            fix=f"run `bagport repair {path}` (or the same conversion again), which finishes or undoes that write.",
         )
     checked = verify_checksums(path)  # first: a changed file is named as changed, whatever it breaks
     info = check_invariants(path)
     dataset = _load_with_lerobot(path, repo_id)
     total = len(dataset)
     if total != info["total_frames"]:
-        raise ValidationError(f"{path}: LeRobot sees {total} frames, info.json says {info['total_frames']}")
+        raise ValidationError(
+            f"LeRobot sees {total} frames, info.json says {info['total_frames']}", path=path, fix=DATASET_FIX
+        )
     video_keys = tuple(dataset.meta.video_keys)
     indices = _indices(dataset, decode_every)
     _decode_frames(path, dataset, indices, video_keys, info, progress)
@@ -74,14 +77,17 @@ def _load_with_lerobot(path: Path, repo_id: str | None) -> Any:
         from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - optional, heavy
     except ImportError as err:
         raise ValidationError(
-            "the lerobot package is not installed, so the dataset cannot be loaded by LeRobot. "
-            "Fix: install bagport with the 'lerobot' extra (the README's set-up command does)."
+            "the lerobot package is not installed, so the dataset cannot be loaded by LeRobot",
+            path=None,
+            fix="install bagport with the 'lerobot' extra (the README's set-up command does).",
         ) from err
     try:
         return LeRobotDataset(repo_id or f"local/{path.name}", root=path, video_backend=video_backend())
     except Exception as err:
         raise ValidationError(
-            f"{path}: LeRobotDataset failed to load it: {type(err).__name__}: {err}"
+            f"LeRobotDataset failed to load it: {type(err).__name__}: {err}",
+            path=path,
+            fix=f"install the lerobot bagport pins (its 'lerobot' extra); if that one is installed, {DATASET_FIX}",
         ) from err
 
 
@@ -99,13 +105,17 @@ def _decode_frames(
             item = dataset[index]
         except Exception as err:
             raise ValidationError(
-                f"{path}: LeRobot failed to read frame index={index}: {type(err).__name__}: {err}"
+                f"LeRobot failed to read frame index={index}: {type(err).__name__}: {err}",
+                path=path,
+                fix=DATASET_FIX,
             ) from err
         for key in video_keys:
             frame = item[key]
             if tuple(frame.shape[-2:]) != tuple(info["features"][key]["shape"][:2]):
                 raise ValidationError(
-                    f"{path}: frame {index} of {key} decoded with shape {tuple(frame.shape)}"
+                    f"frame {index} of {key} decoded with shape {tuple(frame.shape)}",
+                    path=path,
+                    fix=DATASET_FIX,
                 )
         if progress is not None:
             progress(n + 1, len(indices))

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from bagport.bags import open_bag
-from bagport.bags.sqlite_tail import SALVAGE, sqlite_cut
+from bagport.bags.sqlite_tail import SALVAGE_COMMAND, sqlite_cut
 from bagport.episode import convert_episode
 from bagport.errors import BagportError, BagReadError
 from bagport.synth import EpisodeSpec, write_episode_bag
@@ -59,7 +59,7 @@ def test_a_file_cut_mid_page_names_its_size_and_the_length_its_header_gives(
     said = cut.describe()
     assert f"the file ends at byte {size}, but its header says it holds {len(data) // page} pages" in said
     assert "3 page(s) before are whole" in said and "cut short" in said
-    assert f"the whole file is {len(data)} bytes" in cut.fix()
+    assert f"the whole file is {len(data)} bytes" in cut.fix(metadata_yaml=True)
 
 
 def test_a_file_cut_at_a_page_boundary_or_inside_its_header_is_cut_too(bag: Path, tmp_path: Path) -> None:
@@ -112,7 +112,7 @@ def test_the_salvage_the_fix_gives_makes_a_bag_that_converts(bag: Path, tmp_path
     """The fix's command, run as given, keeps the rows before the cut, and bagport reads the new file alone."""
     whole = (bag / "ep.db3").stat().st_size
     cut = _cut_copy(bag, tmp_path / "ep", whole // 2)
-    command = SALVAGE.split("`")[1].replace("FILE", str(cut / "ep.db3"))
+    command = SALVAGE_COMMAND.replace("FILE", str(cut / "ep.db3"))
     subprocess.run(["bash", "-c", command], cwd=tmp_path, check=True, capture_output=True)
     with open_bag(str(tmp_path / "FIXED.db3")) as salvaged, open_bag(str(bag)) as original:
         assert 0 < salvaged.info.message_count < original.info.message_count
@@ -131,3 +131,47 @@ def test_a_longer_file_or_one_with_a_write_ahead_log_is_not_called_cut(bag: Path
     cut = _cut_copy(bag, tmp_path / "ep", len(data) // 2)
     (cut / "ep.db3-wal").write_bytes(b"\0" * 32)
     assert sqlite_cut(cut / "ep.db3") is None
+
+
+def _damage_a_leaf_page(db3: Path) -> None:
+    """The b-tree page type of the messages table's first leaf page, changed: damage, not a cut."""
+    data = bytearray(db3.read_bytes())
+    page = _page_size(bytes(data))
+    leaf = next(at for at in range(page, len(data), page) if data[at] == 0x0D)
+    data[leaf] = 0xFF
+    db3.write_bytes(bytes(data))
+
+
+_IN_FOLDER = "convert FIXED.db3 on its own (the folder's metadata.yaml promises the lost messages)."
+
+
+@pytest.mark.parametrize("kind", ["cut", "damaged"])
+@pytest.mark.parametrize("shape", ["bare-db3", "folder-without-metadata", "folder-with-metadata"])
+def test_what_to_convert_after_the_salvage_depends_on_a_metadata_yaml(
+    bag: Path, tmp_path: Path, kind: str, shape: str
+) -> None:
+    """Only a folder whose metadata.yaml promises the lost messages is told to convert the salvaged file on
+    its own; a .db3 given alone (or a folder without metadata.yaml) has no metadata.yaml to speak of."""
+    folder = _cut_copy(bag, tmp_path / "ep", (bag / "ep.db3").stat().st_size)
+    db3 = folder / "ep.db3"
+    if kind == "cut":
+        db3.write_bytes(db3.read_bytes()[: db3.stat().st_size // 2])
+    else:
+        _damage_a_leaf_page(db3)
+    if shape == "bare-db3":
+        target = tmp_path / "alone.db3"
+        db3.rename(target)
+    else:
+        target = folder
+        if shape == "folder-without-metadata":
+            (folder / "metadata.yaml").unlink()
+    with pytest.raises(BagReadError) as caught, open_bag(str(target)) as reader:
+        list(reader.messages())
+    message = str(caught.value)
+    fix = caught.value.fix
+    assert message.endswith(f"Fix: {fix}") and SALVAGE_COMMAND in fix, message
+    if shape == "folder-with-metadata":
+        assert fix.endswith(_IN_FOLDER), fix
+    else:
+        assert fix.endswith("keeps the rows SQLite can still read; convert FIXED.db3 instead."), fix
+        assert "metadata.yaml" not in message, message

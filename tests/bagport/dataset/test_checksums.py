@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
 
 from bagport.dataset import write_dataset
 from bagport.dataset.checksums import verify_checksums
+from bagport.dataset.invariants import FILE_FIX
 from bagport.dataset.validate import validate_dataset
 from bagport.errors import ValidationError
 from bagport.staging import EpisodeSummary
@@ -73,3 +75,81 @@ def test_a_damaged_data_file_is_named_not_a_traceback(staged: list[EpisodeSummar
     with pytest.raises(ValidationError, match=r"file-000\.parquet: is not a readable parquet file") as err:
         validate_dataset(out, decode_every=1000)
     assert "Fix: " in str(err.value)
+
+
+def test_a_deleted_video_is_named_with_its_record_and_the_fix(
+    staged: list[EpisodeSummary], tmp_path: Path
+) -> None:
+    out = tmp_path / "ds"
+    write_dataset(staged, str(out), robot_type="r")
+    video = out / "videos/observation.images.wrist/chunk-000/file-000.mp4"
+    video.unlink()
+    with pytest.raises(ValidationError) as caught:
+        validate_dataset(out, decode_every=1000)
+    assert caught.value.path == str(video)
+    assert caught.value.fix == FILE_FIX
+    assert str(caught.value) == (
+        f"{video}: missing, but the run record meta/provenance/run.json lists it. Fix: restore the file from a "
+        "backup (or its object store's earlier version), or convert the dataset's bags again into a new "
+        "--output (or --overwrite this one)."
+    )
+
+
+def _delete(relative: str) -> Callable[[Path], None]:
+    return lambda root: (root / relative).unlink()
+
+
+def _truncate(relative: str) -> Callable[[Path], None]:
+    def damage(root: Path) -> None:
+        path = root / relative
+        path.write_bytes(path.read_bytes()[:100])
+
+    return damage
+
+
+def _edit_info(change: dict[str, object]) -> Callable[[Path], None]:
+    def damage(root: Path) -> None:
+        path = root / "meta/info.json"
+        path.write_text(json.dumps({**json.loads(path.read_text()), **change}))
+
+    return damage
+
+
+@pytest.mark.parametrize(
+    ("damage", "said"),
+    [
+        (
+            _delete("data/chunk-000/file-000.parquet"),
+            "file-000.parquet: missing (referenced by episodes [0, 1])",
+        ),
+        (
+            _delete("videos/observation.images.front/chunk-000/file-000.mp4"),
+            "file-000.mp4: missing (referenced",
+        ),
+        (_truncate("videos/observation.images.front/chunk-000/file-000.mp4"), "is not a readable video ("),
+        (_delete("meta/stats.json"), "meta/stats.json: missing."),
+        (_delete("meta/tasks.parquet"), "meta/tasks.parquet: missing."),
+        (_delete("meta/info.json"), "meta/info.json: missing: this is not a LeRobot v3.0 dataset folder."),
+        (_edit_info({"codebase_version": "v2.1"}), "codebase_version is 'v2.1', expected 'v3.0'."),
+        (_edit_info({"total_frames": 1}), "episodes cover"),
+    ],
+    ids=["data", "video", "unreadable-video", "stats", "tasks", "info", "version", "frames"],
+)
+def test_every_finding_without_a_run_record_says_how_to_fix_it(
+    staged: list[EpisodeSummary], tmp_path: Path, damage: Callable[[Path], None], said: str
+) -> None:
+    """With no run record to check against (an older dataset, or one copied without it), the invariants find
+    the damage; each finding names the file and gives a fix."""
+    out = tmp_path / "ds"
+    write_dataset(staged, str(out), robot_type="r")
+    for record in (out / "meta/provenance").glob("run*.json"):
+        record.unlink()
+    damage(out)
+    with pytest.raises(ValidationError) as caught:
+        validate_dataset(out, decode_every=1000)
+    message = str(caught.value)
+    assert said in message and caught.value.path is not None and message.startswith(caught.value.path), (
+        message
+    )
+    assert caught.value.fix and message.endswith(f" Fix: {caught.value.fix}"), message
+    assert "Traceback" not in message and "\n" not in message, message

@@ -32,6 +32,7 @@ from bagport.timewindow import WHOLE_BAG, TimeWindow
 from bagport.uris import is_local, protocol_of, read_text_file
 from bagport.yamlsource import (
     DuplicateKeyError,
+    ValidationProblem,
     YamlJson,
     YamlSource,
     explain_validation,
@@ -256,8 +257,15 @@ def _yaml_invalid(err: pydantic.ValidationError, parsed: YamlSource, source: str
         file=source,
         entry=entry,
         line=problem.line,
-        fix=_NOT_JSON_FIX if first["type"] == "invalid-json-value" else problem.fix,
+        fix=_NOT_JSON_FIX if first["type"] == "invalid-json-value" else _value_fix(problem, loc),
     )
+
+
+def _value_fix(problem: ValidationProblem, loc: tuple[int | str, ...]) -> str:
+    """The field's own advice for a value it refuses; the problem's fix for anything else."""
+    if problem.missing or problem.fix != _FORMAT or len(loc) != 3:  # bags, i, field
+        return problem.fix
+    return _FIELD_FIXES.get(str(loc[2]), problem.fix)
 
 
 def _parse_yaml(text: str, source: str) -> YamlSource:
@@ -281,6 +289,15 @@ def _entry_of(loc: tuple[int | str, ...]) -> int | None:
 
 
 _FORMAT = "a manifest is 'bags:' followed by a list of {uri, task, metadata, start_s, end_s} entries."
+_FIELD_FIXES = {
+    "start_s": "start_s and end_s are seconds from the bag's first message, 0 or more (such as 2.5).",
+    "end_s": "start_s and end_s are seconds from the bag's first message, 0 or more (such as 2.5).",
+    "start_ns": "start_ns and end_ns are ROS times in integer nanoseconds since the epoch (0 or more).",
+    "end_ns": "start_ns and end_ns are ROS times in integer nanoseconds since the epoch (0 or more).",
+    "uri": "uri is the bag's path or URL (a rosbag2 folder, an .mcap/.db3/.bag file, s3://...).",
+    "task": "task is the episode's task prompt, a string.",
+}
+"""A bad value of an entry's field: what that field holds (a missing or unknown key keeps its own advice)."""
 _NOT_JSON_FIX = (
     "metadata values are JSON values: text, numbers, true/false, lists and mappings (dates and times are "
     "read as text)."

@@ -222,3 +222,34 @@ def test_an_empty_manifest_says_it_has_no_bags_list(tmp_path: Path, text: str) -
         load_manifest(str(manifest))
     assert caught.value.line is None and "line None" not in str(caught.value)
     assert "Fix: write 'bags:' then one '- uri: path/to/bag' line per bag" in str(caught.value)
+
+
+@pytest.mark.parametrize(
+    ("entry", "said", "fix"),
+    [
+        (
+            "start_s: -1",
+            "start_s: Input should be greater than or equal to 0",
+            "start_s and end_s are seconds from the bag's first message",
+        ),
+        (
+            "end_ns: later",
+            "end_ns: Input should be a valid integer",
+            "start_ns and end_ns are ROS times in integer nanoseconds",
+        ),
+        (
+            "task: [a, b]",
+            "task: Input should be a valid string",
+            "task is the episode's task prompt, a string.",
+        ),
+    ],
+)
+def test_a_bad_value_of_an_entry_says_what_its_field_holds(entry: str, said: str, fix: str) -> None:
+    with pytest.raises(ManifestError) as caught:
+        parse_manifest(f"bags:\n  - uri: a.mcap\n    {entry}\n", "m.yaml")
+    assert str(caught.value).startswith(f"m.yaml, bags[0]: line 3: {said}"), str(caught.value)
+    assert f"Fix: {fix}" in str(caught.value)
+    with pytest.raises(
+        ManifestError, match=r"did you mean 'start_s'\? *$"
+    ):  # a misspelt key keeps its advice
+        parse_manifest("bags:\n  - uri: a.mcap\n    strat_s: 1\n", "m.yaml")

@@ -33,7 +33,7 @@ from bagport.config import RUNNER_ADDRESSES, ConvertConfig, cli_option
 from bagport.dataset import DatasetReport
 from bagport.errors import BagportError
 from flows.artifacts import publish_run_artifacts
-from flows.cli_config import resolve_options
+from flows.cli_config import COMMAND_LINE_ONLY, resolve_options
 from flows.convert import run_config
 from flows.run_story import RunCounts, completed_state, started_name
 
@@ -99,6 +99,13 @@ class DeploymentConfig(ConvertConfig):
             return data.model_dump()
         if not isinstance(data, Mapping):
             return data
+        if flags := [name for name in data if name in COMMAND_LINE_ONLY]:
+            what = f"{flags[0]} is an option" if len(flags) == 1 else f"{' and '.join(flags)} are options"
+            raise ValueError(
+                f"{what} of the `bagport convert` command, not of a run: a deployment's config has no such key. "
+                "Fix: remove it from the config; push a dataset a deployment wrote with "
+                "`bagport push OUT --repo-id ORG/NAME`."
+            )
         values = _without_placeholders(data)
         addresses = [runner for runner, name in RUNNER_ADDRESSES.items() if values.get(name)]
         if "runner" not in values and len(addresses) == 1:

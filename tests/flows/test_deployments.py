@@ -142,6 +142,18 @@ def test_a_run_yaml_is_a_deployment_config() -> None:
     assert reconvert.validate_parameters({"config": run_yaml})["config"].convert_config() == from_cli
 
 
+def test_a_command_line_only_option_in_a_deployment_config_is_named() -> None:
+    """``push_to_hub`` (or ``quiet``...) is about the CLI command, not the run: named, not pydantic's bare
+    'Extra inputs are not permitted'."""
+    run_yaml = yaml.safe_load((REPO / "configs/run.yaml").read_text())
+    with pytest.raises(ParameterTypeError) as caught:
+        reconvert.validate_parameters({"config": {**run_yaml, "push_to_hub": True, "quiet": True}})
+    said = str(caught.value)
+    assert "push_to_hub and quiet are options of the `bagport convert` command, not of a run" in said, said
+    assert "`bagport push OUT --repo-id ORG/NAME`" in said
+    assert "Extra inputs are not permitted" not in said
+
+
 def test_a_filled_address_picks_its_runner(monkeypatch: pytest.MonkeyPatch) -> None:
     ray = _deployed(monkeypatch, **ENV, BAGPORT_RAY_ADDRESS="ray://head:10001")["fleet-ingestion"]
     assert (_run_config(ray).runner, _run_config(ray).ray_address) == ("ray", "ray://head:10001")

@@ -86,6 +86,18 @@ def _mcap_file(path: Path | RemotePath) -> Checksums | None:
         )
 
 
+def _file_compressed(name: str) -> Checksums:
+    """A ``.mcap.zstd`` (rosbag2's ``compression_mode: file``) is read through its decompression: no chunk
+    CRC of the MCAP inside is checked on the way."""
+    return Checksums(
+        False,
+        f"MCAP compressed as a whole file ({name}): its chunks' CRCs are not checked",
+        "record with the MCAP plugin's own chunk compression instead of `--compression-mode file` "
+        "(`ros2 bag record -s mcap --storage-preset-profile zstd_small`: chunk CRCs kept), or re-write existing "
+        "bags with `ros2 bag convert` and `storage_preset_profile: zstd_small`.",
+    )
+
+
 def _unchecked(why: str) -> Checksums:
     return Checksums(False, f"MCAP without chunk CRCs ({why})", MCAP_FIX)
 
@@ -96,6 +108,8 @@ def bag_checksums(storage: Storage, data_files: Sequence[Path | RemotePath]) -> 
     if storage is not Storage.MCAP:
         return _NONE[storage]
     for path in data_files:
+        if path.name.endswith(".zstd"):
+            return _file_compressed(path.name)
         try:
             found = _mcap_file(path)
         except (McapError, OSError, ValueError, struct.error, EOFError) as err:

@@ -10,11 +10,13 @@ from __future__ import annotations
 import struct
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import IO, Any, cast
 
 import numpy as np
 import numpy.typing as npt
+from backports import zstd
 from mcap.exceptions import McapError
-from mcap.reader import make_reader
+from mcap.reader import McapReader, make_reader
 
 from bagport.bags.damage import damaged_bag
 from bagport.bags.records import Storage
@@ -33,12 +35,14 @@ def mcap_publish_times_ns(
     """Per topic: ``(log_ns, publish_ns)`` sorted by log time (ties keep file order), from the
     bag's ``.mcap`` files (local, or remote and read through the same ranged reads and spill)."""
     wanted = tuple(global_topic(t) for t in topics)
+    if not wanted:  # nothing asked: no file is opened (a file-compressed one would be read whole)
+        return {}
     recorded = [*wanted, *(t.removeprefix("/") for t in wanted)]  # a relative name is the global one
     pairs: dict[str, list[tuple[int, int]]] = {t: [] for t in wanted}
     try:
         for file in files:
             with file.open("rb") as handle:
-                for _, channel, message in make_reader(handle).iter_messages(topics=recorded):
+                for _, channel, message in _mcap_reader(handle, file.name).iter_messages(topics=recorded):
                     pairs[global_topic(channel.topic)].append(
                         (int(message.log_time), int(message.publish_time))
                     )
@@ -63,3 +67,25 @@ def mcap_publish_times_ns(
         order = np.argsort(array[:, 0], kind="stable")
         out[topic] = (array[order, 0], array[order, 1])
     return out
+
+
+class _ForwardOnly:
+    """A stream read front to back only: the mcap library then reads records in file order, with no seek
+    to a summary at the end (which a decompressing stream could only reach by decompressing it all, twice)."""
+
+    def __init__(self, stream: zstd.ZstdFile) -> None:
+        self._stream = stream
+
+    def read(self, size: int = -1) -> bytes:
+        return self._stream.read(size)
+
+    def seekable(self) -> bool:
+        return False
+
+
+def _mcap_reader(handle: Any, name: str) -> McapReader:
+    """The mcap library's reader of one data file; a file-compressed one (``.mcap.zstd``: rosbag2's
+    ``compression_mode: file``) through its decompression, as rosbags reads it (the rows are sorted after)."""
+    if name.endswith(".zstd"):
+        return make_reader(cast(IO[bytes], _ForwardOnly(zstd.ZstdFile(handle))))
+    return make_reader(handle)

@@ -455,3 +455,30 @@ def test_mcap_and_sqlite_in_one_folder_without_metadata_naming_one_is_refused(
     assert "Fix: move the files that are not part of this recording out of the folder, or write its " in str(
         caught.value
     )
+
+
+def test_a_file_compressed_mcap_gives_its_publish_times(tmp_path: Path) -> None:
+    """``ros2 bag record -s mcap --compression-mode file`` writes ``.mcap.zstd`` files: their publish times are
+    read through the decompression (they were refused as 'invalid magic'), the same as the plain file's; and a
+    contract that asks for none (header or receive stamps) opens no file for them."""
+    plain, packed = tmp_path / "plain", tmp_path / "packed"
+    write_strings(plain, StoragePlugin.MCAP)
+    write_strings(packed, StoragePlugin.MCAP, CompressionMode.FILE)
+    assert [p.name for p in packed.iterdir() if p.suffix == ".zstd"] == ["packed.mcap.zstd"]
+    with open_bag(str(plain)) as reader:
+        expected = reader.publish_times_ns(["/s", "/b"])
+    with open_bag(str(packed)) as reader:
+        found = reader.publish_times_ns(["/s", "/b"])
+        assert reader.publish_times_ns([]) == {}
+        checksums = reader.info.checksums
+    # the MCAP inside is read through its decompression: said as such, not as a summary that cannot be read
+    assert checksums is not None and not checksums.checked
+    assert (
+        checksums.detail
+        == "MCAP compressed as a whole file (packed.mcap.zstd): its chunks' CRCs are not checked"
+    )
+    assert "instead of `--compression-mode file`" in checksums.fix
+    assert sorted(found) == sorted(expected) == ["/b", "/s"]
+    for topic, (log_ns, publish_ns) in expected.items():
+        assert found[topic][0].tolist() == log_ns.tolist() == [100, 101, 102, 103, 104]
+        assert found[topic][1].tolist() == publish_ns.tolist()

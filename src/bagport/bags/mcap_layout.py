@@ -22,7 +22,15 @@ from bagport.bags.mcap_tail import RECORD_HEAD, record_heads
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
-__all__ = ["FIX", "LayoutDamage", "check_summaries", "mcap_layout_damage", "summary_damage"]
+__all__ = [
+    "FIX",
+    "LayoutDamage",
+    "check_profiles",
+    "check_summaries",
+    "header_profile",
+    "mcap_layout_damage",
+    "summary_damage",
+]
 
 _FOOTER = struct.Struct("<BQQQI")  # opcode, length, summary start, summary offset start, summary CRC
 _TAIL = _FOOTER.size + len(MAGIC)
@@ -127,6 +135,68 @@ def check_summaries(uri: str, files: Iterable[Path | RemotePath]) -> None:
         if found is not None:
             where = f"{file.name} at byte offset {found.offset}"
             raise BagReadError(f"cannot be opened: {where}: {found.what}", uri=uri, fix=FIX)
+
+
+ROS2_PROFILE = "ros2"
+"""The profile rosbag2's MCAP plugin writes in the header record, and the one rosbags reads."""
+_PROFILE_HEAD = len(MAGIC) + RECORD_HEAD.size + 4 + 64
+
+
+def header_profile(path: Path | RemotePath) -> str | None:
+    """The profile an MCAP file's header record names (one small read); ``None`` when the file does not start
+    with a readable header record (a file cut short or damaged there is the other checks' to name)."""
+    with path.open("rb") as handle:
+        head = handle.read(_PROFILE_HEAD)
+    at = len(MAGIC) + RECORD_HEAD.size
+    if (
+        not head.startswith(MAGIC)
+        or len(head) < at + 4
+        or RECORD_HEAD.unpack_from(head, len(MAGIC))[0] != _HEADER
+    ):
+        return None
+    (size,) = struct.unpack_from("<I", head, at)
+    if at + 4 + size > len(head):
+        return None
+    try:
+        return head[at + 4 : at + 4 + size].decode("utf-8")
+    except UnicodeDecodeError:
+        return None
+
+
+def check_profiles(uri: str, files: Iterable[Path | RemotePath], *, metadata_yaml: bool) -> None:
+    """Refuse an MCAP file that is not rosbag2's (header profile ``ros2``), saying what it is: rosbags
+    refuses it with "Profile is not ros2", which reads as damage. In a bag whose ``metadata.yaml`` says
+    rosbag2 recorded it, another profile is damage to the header. A file compressed whole (``.zstd``) is
+    checked by its reader once decompressed."""
+    for file in files:
+        if file.name.endswith(".zstd"):
+            continue
+        profile = header_profile(file)
+        if profile is None or profile == ROS2_PROFILE:
+            continue
+        if metadata_yaml:
+            raise BagReadError(
+                f"cannot be opened: {file.name} at byte offset {len(MAGIC)}: its header record names profile "
+                f"{profile!r} where rosbag2, which recorded this bag (its metadata.yaml), writes "
+                f"{ROS2_PROFILE!r}: its bytes changed after recording",
+                uri=uri,
+                fix=FIX,
+            )
+        if profile == "ros1":
+            what = "holds ROS 1 messages (header profile 'ros1', as `mcap convert` of a .bag writes)"
+            fix = "convert the original .bag file: bagport reads ROS 1 bags directly."
+        else:
+            what = f"is not a rosbag2 MCAP file: its header profile is {profile!r}, not {ROS2_PROFILE!r}"
+            fix = (
+                "write it as rosbag2 does (`ros2 bag record -s mcap`; with the mcap library, "
+                "`Writer.start(profile='ros2')` with ros2msg schemas and CDR messages); a file of other "
+                "messages (JSON, Protobuf) needs converting to ROS 2 messages first."
+            )
+        raise BagReadError(
+            f"{file.name} {what}; bagport reads MCAP as rosbag2 writes it (profile 'ros2', CDR messages)",
+            uri=uri,
+            fix=fix,
+        )
 
 
 def mcap_layout_damage(path: Path | RemotePath) -> LayoutDamage | None:

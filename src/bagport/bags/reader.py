@@ -24,7 +24,7 @@ from bagport.bags.download import download_bag
 from bagport.bags.indexcount import index_time_range, window_counts
 from bagport.bags.interface import BagReader
 from bagport.bags.layout import BagPath, ReadPlan, plan_reads
-from bagport.bags.mcap_layout import check_summaries
+from bagport.bags.mcap_layout import check_profiles, check_summaries
 from bagport.bags.message import BagMessage, HeaderLayout
 from bagport.bags.publish import Int64Array, mcap_publish_times_ns
 from bagport.bags.records import BagInfo, Storage, TopicInfo
@@ -102,9 +102,13 @@ class RosbagsReader:
             bundled = get_typestore(store)
             # the type store is shared by bags with the same definitions, storage and extra types
             store_key = f"{store}:{json.dumps(sorted((msg_definitions or {}).items()))}"
+            mcap_files = plan.data_files if storage is Storage.MCAP else []
+            check_profiles(
+                uri, mcap_files, metadata_yaml=plan.metadata_yaml
+            )  # rosbags' refusal reads as damage
             self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled, store_key=store_key)
             self._reader.open()
-            check_summaries(uri, plan.data_files if storage is Storage.MCAP else [])
+            check_summaries(uri, mcap_files)
             msgtypes = {normalize_msgtype(c.msgtype) for c in self._reader.connections}
             lacking, sources = complete_bag_types(
                 self._reader, msgtypes, extra, bundled, store.name.replace("_", " ")

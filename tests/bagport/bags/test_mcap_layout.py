@@ -12,6 +12,10 @@ from pathlib import Path
 import pytest
 
 from bagport.bags import format_bag_info, open_bag
+from bagport.bags.damage import damaged_bag
+from bagport.bags.mcap_layout import FIX as MCAP_FIX
+from bagport.bags.mcap_layout import header_profile
+from bagport.bags.records import Storage
 from bagport.errors import BagReadError
 from bagport.synth import EpisodeSpec, write_episode_bag
 
@@ -110,15 +114,27 @@ def test_a_summary_failing_its_crc_is_refused_though_it_parses(tmp_path: Path) -
     assert COPY_AGAIN in text
 
 
-def test_damage_bagport_cannot_locate_quotes_the_reader(tmp_path: Path) -> None:
+def test_a_zeroed_profile_in_a_rosbag2_bag_is_damage_at_the_header(tmp_path: Path) -> None:
     bag, mcap = _bag(tmp_path, CRCS)
     data = bytearray(mcap.read_bytes())
     data[17:21] = bytes(4)  # the header's profile: "" (no framing damage: its length still fits)
     mcap.write_bytes(bytes(data))
-    with pytest.raises(
-        BagReadError, match=r"cannot be opened; the reader said: AnyReaderError: Profile is not"
-    ):
+    with pytest.raises(BagReadError) as caught:
         open_bag(str(bag))
+    assert str(caught.value) == (
+        f"{bag}: cannot be opened: ep.mcap at byte offset 8: its header record names profile '' where rosbag2, "
+        "which recorded this bag (its metadata.yaml), writes 'ros2': its bytes changed after recording Fix: "
+        f"{MCAP_FIX}"
+    )
+
+
+def test_damage_bagport_cannot_locate_quotes_the_reader(tmp_path: Path) -> None:
+    bag, mcap = _bag(tmp_path, CRCS)
+    error = damaged_bag(
+        ValueError("a reason of the reader's own"),
+        uri=str(bag), storage=Storage.MCAP, files=[mcap], action="cannot be opened", metadata_yaml=True,
+    )  # fmt: skip
+    assert "cannot be opened; the reader said: ValueError: a reason of the reader's own" in str(error)
 
 
 def test_a_zeroed_first_chunk_crc_among_crcs_is_damage_not_a_bag_without_crcs(tmp_path: Path) -> None:
@@ -134,3 +150,58 @@ def test_a_zeroed_first_chunk_crc_among_crcs_is_damage_not_a_bag_without_crcs(tm
         f"MCAP chunk CRC-32s, except the chunk at byte offset {chunks[0]} of ep.mcap: its CRC field" in text
     )
     assert "written with CRCs off" not in text and "Fix: " not in text
+
+
+def _mcap_of_profile(path: Path, profile: str, encoding: str) -> Path:
+    """One std_msgs/String message in an MCAP file written by the mcap library with ``profile``."""
+    from mcap.writer import Writer  # noqa: PLC0415 - only these tests write MCAP without rosbag2's plugin
+
+    with path.open("wb") as handle:
+        writer = Writer(handle)
+        writer.start(profile=profile, library="test")
+        schema_encoding = "ros1msg" if encoding == "ros1" else "ros2msg"
+        schema = writer.register_schema(
+            name="std_msgs/msg/String", encoding=schema_encoding, data=b"string data"
+        )
+        channel = writer.register_channel(topic="/s", message_encoding=encoding, schema_id=schema)
+        writer.add_message(
+            channel, log_time=1, data=b"\x00\x01\x00\x00\x03\x00\x00\x00hi\x00", publish_time=1
+        )
+        writer.finish()  # type: ignore[no-untyped-call]
+    return path
+
+
+@pytest.mark.parametrize(
+    ("profile", "encoding", "said", "fix"),
+    [
+        ("ros1", "ros1", "holds ROS 1 messages (header profile 'ros1'", "convert the original .bag file"),
+        (
+            "",
+            "cdr",
+            "is not a rosbag2 MCAP file: its header profile is '', not 'ros2'",
+            "Writer.start(profile='ros2')",
+        ),
+    ],
+    ids=["ros1", "empty"],
+)
+def test_an_mcap_of_another_profile_is_named_as_such_not_as_damage(
+    tmp_path: Path, profile: str, encoding: str, said: str, fix: str
+) -> None:
+    """rosbags refuses these with "Profile is not ros2", which bagport used to report as damaged bytes to
+    copy again; what the file is, and what to convert instead, is said."""
+    path = _mcap_of_profile(tmp_path / "other.mcap", profile, encoding)
+    assert header_profile(path) == profile
+    with pytest.raises(BagReadError) as caught:
+        open_bag(str(path))
+    text = str(caught.value)
+    assert f"other.mcap {said}" in text and fix in text, text
+    assert "copy the file again" not in text and "the reader said" not in text
+
+
+def test_a_rosbag2_mcap_names_the_ros2_profile(tmp_path: Path) -> None:
+    bag = tmp_path / "ep"
+    write_episode_bag(bag, "mcap", EpisodeSpec(duration_s=0.2))
+    (data,) = bag.glob("*.mcap")
+    assert header_profile(data) == "ros2"
+    (tmp_path / "short.mcap").write_bytes(data.read_bytes()[:10])  # no whole header record: not said here
+    assert header_profile(tmp_path / "short.mcap") is None

@@ -59,6 +59,13 @@ def _parse(name: str, fields: dict[str, str], point: int = 0) -> _JointSelector:
     return _JointSelector(point, fields["position"], name)
 
 
+_SHARED_TOPIC_FIX = (
+    "bagport reads one set of joints per topic: record the merged joint states on one topic "
+    "(joint_state_publisher's source_list), or remap each publisher to a topic of its own and map each in its own "
+    "contract entry."
+)
+
+
 class _ByName:
     """Values by joint name; the order of names may change between messages (cached per order)."""
 
@@ -94,17 +101,32 @@ class _ByName:
     def _build_index(self, names: tuple[str, ...]) -> dict[tuple[int, str], npt.NDArray[np.intp]]:
         lookup = {name: i for i, name in enumerate(names)}
         missing = list(dict.fromkeys(s.joint for s in self._selectors if s.joint not in lookup))
-        if missing:
-            raise DecodeError(
-                f"joint(s) {missing} not in this {self._what} message (it has {list(names)})",
-                topic=self._topic,
-                fix="fix selector.names in the contract to use joint names the robot publishes"
-                + ("; it publishes none: select by index, e.g. 'position[0]'." if not names else "."),
-            )
+        if missing:  # earlier messages on the topic had every selected joint: another publisher's
+            raise self._missing(missing, names, shared=bool(self._indices))
         return {
             group: np.array([lookup[self._selectors[i].joint] for i in slots], dtype=np.intp)
             for group, slots in self._slots.items()
         }
+
+    def _missing(self, missing: list[str], names: tuple[str, ...], *, shared: bool) -> DecodeError:
+        said = f"joint(s) {missing} not in this {self._what} message (it has {list(names)})"
+        if shared:
+            said += (
+                ", though earlier messages on the topic had them: publishers with different joints share the "
+                "topic (an arm's and a gripper's driver, say)"
+            )
+            return DecodeError(said, topic=self._topic, fix=_SHARED_TOPIC_FIX)
+        if not names:
+            fix = (
+                "fix selector.names in the contract to use joint names the robot publishes; it publishes none: "
+                "select by index, e.g. 'position[0]'."
+            )
+        else:
+            fix = (
+                "fix selector.names in the contract to use joint names the robot publishes; if other messages on "
+                f"this topic carry them, {_SHARED_TOPIC_FIX}"
+            )
+        return DecodeError(said, topic=self._topic, fix=fix)
 
     def __call__(self, msg: Any) -> Vector:
         names = self._names_of(msg)

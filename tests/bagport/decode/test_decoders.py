@@ -64,6 +64,30 @@ def test_joint_state_without_selector_takes_all_positions_in_first_order() -> No
     assert extractor(_joint_state(["y", "x"], [5.0, 4.0])).tolist() == [4.0, 5.0]
 
 
+def test_joints_that_another_publisher_on_the_topic_sends_are_said_to_be() -> None:
+    """An arm's and a gripper's driver both on /joint_states: the gripper's message lacks the arm's joints
+    the first messages had; the error says the topic is shared, not that the contract names wrong joints."""
+    arm = _joint_state(["j1", "j2"], [1.0, 2.0])
+    extractor = make_extractor(_src("sensor_msgs/msg/JointState", ("position.j1", "position.j2")), arm)
+    assert extractor(arm).tolist() == [1.0, 2.0]
+    with pytest.raises(DecodeError) as caught:
+        extractor(_joint_state(["j3"], [0.5]))
+    said = str(caught.value)
+    assert (
+        "joint(s) ['j1', 'j2'] not in this JointState message (it has ['j3']), though earlier messages"
+        in said
+    )
+    assert "Fix: bagport reads one set of joints per topic: record the merged joint states" in said
+    assert "fix selector.names" not in said
+    fresh = make_extractor(_src("sensor_msgs/msg/JointState", ("position.j1",)), arm)
+    with pytest.raises(
+        DecodeError, match=r"joint names the robot publishes; if other messages on this topic"
+    ):
+        fresh(
+            _joint_state(["j3"], [0.5])
+        )  # the first message seen is the other publisher's: both causes said
+
+
 def test_joint_state_errors_say_what_is_missing() -> None:
     extractor = make_extractor(
         _src("sensor_msgs/msg/JointState", ("position.z",)), _joint_state(["a"], [1.0])

@@ -3,7 +3,8 @@
 Colour and grey encodings come out RGB uint8: ``rgb8``, ``bgr8``, ``rgba8``, ``bgra8``, ``8UC3``
 (OpenCV's BGR order), ``mono8``, ``8UC1``, ``mono16`` (scaled to 8 bits: ``round(v / 257)``) and
 ``bayer_rggb8|bggr8|gbrg8|grbg8`` (bilinear demosaic; the ``...16`` variants are scaled to 8 bits
-first). Depth encodings come out float32 metres with NaN for invalid
+first), and packed 4:2:2 ``yuv422`` (UYVY) and ``yuv422_yuy2`` (YUYV; also ``uyvy``, ``yuyv``: BT.601
+limited range, converted by swscale). Depth encodings come out float32 metres with NaN for invalid
 (:mod:`bagport.decode.depth`): ``16UC1`` (millimetres), ``32FC1`` (metres), and
 ``compressedDepth`` CompressedImages. CompressedImage ``jpeg`` and ``png`` come out RGB (a
 16-bit PNG whose format names ``16UC1`` is depth in millimetres).
@@ -15,6 +16,7 @@ import io
 from enum import Enum
 from typing import Any
 
+import av
 import numpy as np
 import numpy.typing as npt
 import simplejpeg
@@ -45,6 +47,9 @@ class RawEncoding:
     TYPE_32FC1 = "32fc1"
 
 
+_YUV422_UYVY = {"yuv422": True, "uyvy": True, "yuv422_yuy2": False, "yuyv": False}
+"""Packed 4:2:2 encodings, whether their bytes run U Y V Y (image_encodings: ``yuv422`` is UYVY, as USB
+cameras send it; ``yuv422_yuy2`` is YUYV; ROS 2 also names them ``uyvy`` and ``yuyv``)."""
 _BAYER8 = {f"bayer_{p}8": p for p in BAYER_PATTERNS}
 _BAYER16 = {f"bayer_{p}16": p for p in BAYER_PATTERNS}
 _LAYOUT: dict[str, tuple[str, int]] = {
@@ -60,6 +65,7 @@ _LAYOUT: dict[str, tuple[str, int]] = {
     RawEncoding.TYPE_32FC1: ("f4", 1),
     **dict.fromkeys(_BAYER8, ("u1", 1)),
     **dict.fromkeys(_BAYER16, ("u2", 1)),
+    **dict.fromkeys(_YUV422_UYVY, ("u1", 2)),
 }
 _JPEG_MAGIC = b"\xff\xd8"
 _PNG_MAGIC = b"\x89PNG"
@@ -117,6 +123,23 @@ def _pixels(msg: Any, encoding: str) -> npt.NDArray[Any]:
     return values.reshape(height, width, channels)
 
 
+def _yuv422_to_rgb(pixels: npt.NDArray[np.uint8], *, uyvy: bool, encoding: str) -> Rgb:
+    """Packed 4:2:2 YUV (two bytes a pixel, a U and V pair per two pixels) to RGB with swscale, as FFmpeg
+    converts such camera frames (BT.601, limited range: what USB cameras send)."""
+    height, width = pixels.shape[:2]
+    if width % 2:
+        raise DecodeError(
+            f"a {encoding} image has {width} pixels a row, but its U/V samples pair the pixels: the width must be even",
+            fix="the message's width or encoding field is wrong; record the camera again, or as rgb8.",
+        )
+    # (H, W, 2) bytes; U Y V Y -> Y U Y V: each byte pair swapped
+    packed: npt.NDArray[np.uint8] = np.ascontiguousarray(pixels[:, :, ::-1] if uyvy else pixels)
+    if height % 2:  # PyAV takes yuyv422 frames of even height only: the last row twice, dropped after
+        packed = np.concatenate([packed, packed[-1:]])
+    frame = av.VideoFrame.from_ndarray(packed, format="yuyv422")
+    return np.asarray(frame.to_ndarray(format="rgb24")[:height], dtype=np.uint8)
+
+
 def _decode_raw(msg: Any) -> npt.NDArray[Any]:
     encoding = str(msg.encoding).lower()
     if encoding not in _LAYOUT:
@@ -139,6 +162,8 @@ def _decode_raw(msg: Any) -> npt.NDArray[Any]:
         return demosaic(np.ascontiguousarray(pixels[:, :, 0]), _BAYER8[encoding])
     if encoding in _BAYER16:
         return demosaic(_to_8bit(pixels[:, :, 0]), _BAYER16[encoding])
+    if encoding in _YUV422_UYVY:
+        return _yuv422_to_rgb(pixels, uyvy=_YUV422_UYVY[encoding], encoding=encoding)
     grey = _to_8bit(pixels) if pixels.dtype.itemsize == 2 else pixels
     return np.repeat(grey, 3, axis=2)
 

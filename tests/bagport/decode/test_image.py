@@ -264,3 +264,34 @@ def test_depth_resize_averages_valid_depth_only() -> None:
     np.testing.assert_allclose(out[0, 0], 2.0)  # the hole does not pull the depth towards 0
     assert np.isnan(out[0, 1])  # three quarters invalid: invalid
     np.testing.assert_allclose(out[1], [5.0, 6.5])
+
+
+def _yuv601(rgb: tuple[int, int, int]) -> tuple[int, int, int]:
+    """BT.601 limited-range Y, U, V of one RGB colour (what a USB camera sends for it)."""
+    r, g, b = rgb
+    y = 16 + (65.481 * r + 128.553 * g + 24.966 * b) / 255
+    u = 128 + (-37.797 * r - 74.203 * g + 112.0 * b) / 255
+    v = 128 + (112.0 * r - 93.786 * g - 18.214 * b) / 255
+    return round(y), round(u), round(v)
+
+
+@pytest.mark.parametrize("encoding", ["yuv422", "uyvy", "yuv422_yuy2", "yuyv"])
+def test_packed_yuv422_gives_the_true_colours(encoding: str) -> None:
+    """A USB camera's packed 4:2:2 frames (yuv422 is UYVY, yuv422_yuy2 YUYV): four colour bars, each two
+    pixels wide (a U/V pair), come out as their RGB within rounding; a row padded beyond its bytes too."""
+    bars = [(200, 30, 30), (30, 200, 30), (30, 30, 200), (128, 128, 128)]
+    uyvy = encoding in ("yuv422", "uyvy")
+    row: list[int] = []
+    for colour in bars:
+        y, u, v = _yuv601(colour)
+        row += [u, y, v, y] if uyvy else [y, u, y, v]
+    pixels = np.array([row] * 3, dtype=np.uint8).reshape(3, len(bars) * 2, 2)  # (H, W, 2 bytes)
+    out = decode_image(_image(encoding, pixels, pad=6), IMAGE)
+    assert out.shape == (3, 8, 3) and out.dtype == np.uint8
+    want = np.repeat(np.array(bars, dtype=np.int16), 2, axis=0)
+    assert np.abs(out[1].astype(np.int16) - want).max() <= 3, out[1]
+
+
+def test_packed_yuv422_with_an_odd_width_is_an_error() -> None:
+    with pytest.raises(DecodeError, match=r"a yuv422 image has 3 pixels a row, .* the width must be even"):
+        decode_image(_image("yuv422", np.zeros((2, 3, 2), dtype=np.uint8)), IMAGE)

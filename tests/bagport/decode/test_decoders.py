@@ -171,8 +171,8 @@ def test_mono8_becomes_grey_rgb() -> None:
 
 
 def test_raw_image_errors() -> None:
-    with pytest.raises(DecodeError, match=r"encoding .yuv422. is not supported"):
-        decode_image(_raw("yuv422", RGB), "sensor_msgs/msg/Image")
+    with pytest.raises(DecodeError, match=r"encoding .nv21. is not supported"):
+        decode_image(_raw("nv21", RGB), "sensor_msgs/msg/Image")
     msg = _raw("rgb8", RGB)
     msg.data = msg.data[:-3]
     with pytest.raises(DecodeError, match="truncated"):

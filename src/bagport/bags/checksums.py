@@ -17,7 +17,7 @@ from typing import IO
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
-from bagport.bags.records import Checksums, Storage
+from bagport.bags.records import Checksums, Storage, compressed_whole
 from bagport.bags.remote import RemotePath
 
 __all__ = ["bag_checksums"]
@@ -108,7 +108,7 @@ def bag_checksums(storage: Storage, data_files: Sequence[Path | RemotePath]) -> 
     if storage is not Storage.MCAP:
         return _NONE[storage]
     for path in data_files:
-        if path.name.endswith(".zstd"):
+        if compressed_whole(path.name):
             return _file_compressed(path.name)
         try:
             found = _mcap_file(path)

@@ -19,6 +19,7 @@ from typing import IO
 
 from bagport.bags.detect import MCAP_MAGIC as MAGIC
 from bagport.bags.mcap_tail import RECORD_HEAD, record_heads
+from bagport.bags.records import compressed_whole
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
@@ -169,7 +170,7 @@ def check_profiles(uri: str, files: Iterable[Path | RemotePath], *, metadata_yam
     rosbag2 recorded it, another profile is damage to the header. A file compressed whole (``.zstd``) is
     checked by its reader once decompressed."""
     for file in files:
-        if file.name.endswith(".zstd"):
+        if compressed_whole(file.name):
             continue
         profile = header_profile(file)
         if profile is None or profile == ROS2_PROFILE:

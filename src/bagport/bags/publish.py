@@ -19,7 +19,7 @@ from mcap.exceptions import McapError
 from mcap.reader import McapReader, make_reader
 
 from bagport.bags.damage import damaged_bag
-from bagport.bags.records import Storage
+from bagport.bags.records import Storage, compressed_whole
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 from bagport.msgtypes import global_topic
@@ -86,6 +86,6 @@ class _ForwardOnly:
 def _mcap_reader(handle: Any, name: str) -> McapReader:
     """The mcap library's reader of one data file; a file-compressed one (``.mcap.zstd``: rosbag2's
     ``compression_mode: file``) through its decompression, as rosbags reads it (the rows are sorted after)."""
-    if name.endswith(".zstd"):
+    if compressed_whole(name):
         return make_reader(cast(IO[bytes], _ForwardOnly(zstd.ZstdFile(handle))))
     return make_reader(handle)

@@ -6,7 +6,13 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
-__all__ = ["BagInfo", "Checksums", "Storage", "TopicInfo"]
+__all__ = ["BagInfo", "Checksums", "Storage", "TopicInfo", "compressed_whole"]
+
+
+def compressed_whole(file_name: str) -> bool:
+    """A data file rosbag2 compressed whole (``.mcap.zstd``/``.db3.zstd``: ``compression_mode: file``): its
+    own format's bytes are only reached through its decompression."""
+    return file_name.endswith(".zstd")
 
 
 class Storage(StrEnum):

@@ -12,15 +12,14 @@ from dataclasses import dataclass
 from bagport.bags import BagReader, open_bag
 from bagport.contract import ContractPlan, FeatureKind, SourceSpec
 from bagport.decode import (
-    child_frames,
     decode_image,
-    find_transform,
     image_channels,
     make_extractor,
     resize_image,
 )
 from bagport.decode.video import video_packet
 from bagport.episode.checks import check_bag_fits
+from bagport.episode.samples import sample_tests
 from bagport.errors import ContractError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
 from bagport.segment import check_episode_topics
@@ -99,32 +98,32 @@ def describe_features(
 
 
 def _first_messages(reader: BagReader, plan: ContractPlan) -> dict[str, object]:
-    """The first message of every stream (a TF stream's first message carrying its transform)."""
-    filters = plan.stream_filters()
+    """The first message of every stream (a filtered stream's first sample: a TF stream's first message
+    carrying its transform)."""
+    tests = sample_tests(plan.stream_filters())
     wanted = set(plan.streams())
     first: dict[str, object] = {}
-    frames_seen: dict[str, None] = {}
     for message in reader.messages(tuple(dict.fromkeys(s.topic for s in plan.sources))):
         for stream in wanted - first.keys():
-            spec = filters.get(stream)
-            if spec is None and stream == message.topic:
+            test = tests.get(stream)
+            sample = (
+                stream == message.topic
+                if test is None
+                else test.spec.topic == message.topic and test.carries(message)
+            )
+            if sample:
                 first[stream] = message.msg()
-            elif spec is not None and spec.topic == message.topic:
-                if find_transform(message.msg(), spec.child_frame, spec.parent_frame) is not None:
-                    first[stream] = message.msg()
-                else:
-                    frames_seen.update(dict.fromkeys(child_frames(message.msg())))
         if len(first) == len(wanted):
             break
     for src in plan.sources:
-        if src.child_frame is not None and src.stream not in first:
+        test = tests.get(src.stream)
+        if test is not None and src.stream not in first:
             raise ContractError(
-                f"no message on {src.topic} in {reader.info.uri} carries a transform to child frame "
-                f"{src.child_frame!r} (transforms seen: {', '.join(list(frames_seen)[:30]) or 'none'})",
+                f"no message on {src.topic} in {reader.info.uri} carries {test.wanted()} ({test.seen_text()})",
                 file=plan.source_name,
                 line=src.line,
-                field=f"{src.section}[key={src.key}].selector.child_frame",
-                fix="use a frame the bag publishes.",
+                field=f"{src.section}[key={src.key}].{test.field}",
+                fix=test.fix(),
             )
     return first
 

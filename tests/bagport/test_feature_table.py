@@ -32,8 +32,9 @@ def test_unknown_joint_and_missing_topic_are_caught_before_converting(tmp_path: 
     plan = parse_contract(SAMPLE_CONTRACT.read_text().replace("position.j6]", "position.elbow]", 1), "c.yaml")
     with pytest.raises(
         ContractError,
-        match=r"c\.yaml:6 \(observations\[key=observation\.state\]\.selector\): joint\(s\) \['elbow'\] not in "
-        r"this JointState message \(it has \['j1', 'j2', 'j3', 'j4', 'j5', 'j6'\]\) \(first message on /joint_states",
+        match=r"c\.yaml:6 \(observations\[key=observation\.state\]\.selector\.names\): no message on /joint_states "
+        r"in .* carries all of the joints \[.*'elbow'\] \(no message names \['elbow'\]; joint lists seen: "
+        r"\['j1', 'j2', 'j3', 'j4', 'j5', 'j6'\]",
     ):
         describe_features(plan, str(tmp_path / "ep"))
     plan = parse_contract(SAMPLE_CONTRACT.read_text().replace("/cmd", "/command"), "c.yaml")

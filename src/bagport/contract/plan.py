@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from typing import NamedTuple
 
@@ -15,6 +15,7 @@ from bagport.contract.model import (
     StampSource,
     TaskEntry,
 )
+from bagport.decode.joints import selected_joints
 from bagport.errors import ContractError
 from bagport.msgtypes import IMAGE_TYPES, TF_TYPES, RosType
 
@@ -22,9 +23,11 @@ __all__ = [
     "ContractPlan",
     "FeatureKind",
     "FeatureSpec",
+    "JointFilter",
     "LineOf",
     "SourceSpec",
     "StreamFilter",
+    "TransformFilter",
     "compile_contract",
 ]
 
@@ -32,12 +35,24 @@ LineOf = Callable[[Sequence[int | str]], int | None]
 """Maps a value path in the contract (``("observations", 2, "key")``) to its line in the file."""
 
 
-class StreamFilter(NamedTuple):
+class TransformFilter(NamedTuple):
     """Only the messages of ``topic`` carrying this transform are samples of the stream."""
 
     topic: str
     child_frame: str
     parent_frame: str | None
+
+
+class JointFilter(NamedTuple):
+    """Only the JointState messages of ``topic`` naming every one of ``joints`` are samples of the stream:
+    publishers with different joints (an arm's and a gripper's driver) may share the topic."""
+
+    topic: str
+    joints: tuple[str, ...]
+
+
+StreamFilter = TransformFilter | JointFilter
+"""Which messages of a topic are the samples of a stream (every message when there is none)."""
 
 
 _NUMERIC_DTYPES = frozenset({"float32", "float64", "int32", "int64", "bool", "uint8", "int16", "float16"})
@@ -73,6 +88,10 @@ class SourceSpec:
     """Line of the entry in the contract file, for errors."""
     child_frame: str | None = None
     parent_frame: str | None = None
+    joints: tuple[str, ...] = ()
+    """A JointState read by joint name: the joints a message must name to be a sample (:class:`JointFilter`)."""
+    joints_in_stream: bool = False
+    """The stream's name says its joints: entries on the topic select different joints."""
 
     @property
     def msg_type(self) -> str:
@@ -81,18 +100,29 @@ class SourceSpec:
 
     @property
     def stream(self) -> str:
-        """What the timeline tracks: the topic, or ``topic#child_frame`` for a TF lookup."""
-        return self.topic if self.child_frame is None else f"{self.topic}#{self.child_frame}"
+        """What the timeline tracks: the topic, ``topic#child_frame`` for a TF lookup, or ``topic#j1,j2`` for
+        joints that other entries on the topic do not select."""
+        if self.child_frame is not None:
+            return f"{self.topic}#{self.child_frame}"
+        if self.joints_in_stream:
+            return f"{self.topic}#{','.join(self.joints)}"
+        return self.topic
 
     @property
     def stream_filter(self) -> StreamFilter | None:
-        if self.child_frame is None:
-            return None
-        return StreamFilter(self.topic, self.child_frame, self.parent_frame)
+        if self.child_frame is not None:
+            return TransformFilter(self.topic, self.child_frame, self.parent_frame)
+        if self.joints:
+            return JointFilter(self.topic, self.joints)
+        return None
 
     def where(self, source_name: str) -> str:
         """``file:line`` of this entry, for error messages."""
         return f"{source_name}:{self.line}" if self.line is not None else source_name
+
+    def entry_text(self, source_name: str) -> str:
+        """``contract.yaml:12, observations[key=observation.state]``: the entry, for error messages."""
+        return f"{self.where(source_name)}, {self.section}[key={self.key}]"
 
 
 @dataclass(frozen=True, slots=True)
@@ -158,12 +188,14 @@ def _source(
     align = entry.align
     image = entry.image if isinstance(entry, ObservationEntry) else None
     resize = image.resize if image else None
+    names = entry.selector.names if entry.selector else ()
+    by_joint_name = msgtype == RosType.JOINT_STATE and entry.decoder is None
     return SourceSpec(
         key=entry.key,
         section=section,
         topic=topic,
         msgtype=msgtype,
-        names=entry.selector.names if entry.selector else (),
+        names=names,
         stamp=align.stamp if align and align.stamp else default_stamp,
         strategy=align.strategy if align else "hold",
         tol_ms=align.tol_ms if align else None,
@@ -175,7 +207,20 @@ def _source(
         line=line,
         child_frame=entry.selector.child_frame if entry.selector else None,
         parent_frame=entry.selector.parent_frame if entry.selector else None,
+        joints=selected_joints(names) if by_joint_name else (),
     )
+
+
+def _name_joint_streams(sources: list[SourceSpec]) -> list[SourceSpec]:
+    """Entries selecting different joints of one topic read different streams (their own messages)."""
+    selections: dict[str, set[tuple[str, ...]]] = {}
+    for src in sources:
+        if src.child_frame is None:
+            selections.setdefault(src.topic, set()).add(src.joints)
+    return [
+        replace(src, joints_in_stream=True) if src.joints and len(selections[src.topic]) > 1 else src
+        for src in sources
+    ]
 
 
 def action_offset_ns(contract: Contract, source_name: str) -> int:
@@ -273,7 +318,7 @@ def compile_contract(
             fix="add at least one entry under 'observations' or 'actions'.",
         )
 
-    grouped: dict[str, list[tuple[SourceSpec, str | None]]] = {}
+    sources = []
     for entry, section, stamp, index in entries:
         src = _source(
             entry,
@@ -284,6 +329,9 @@ def compile_contract(
         )
         _check_align(src, section, source_name)
         _check_frames(src, section, source_name)
+        sources.append(src)
+    grouped: dict[str, list[tuple[SourceSpec, str | None]]] = {}
+    for src, (entry, *_) in zip(_name_joint_streams(sources), entries, strict=True):
         grouped.setdefault(src.key, []).append((src, entry.dtype))
 
     features = [_feature(key, group, source_name) for key, group in grouped.items()]

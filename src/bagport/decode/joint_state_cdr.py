@@ -31,6 +31,8 @@ __all__ = ["JointStateArrays", "JointStateCdr", "joint_state_reader"]
 _U32 = struct.Struct("<I")
 _CDR_LE = b"\x00\x01"
 _ENCAPSULATION_BYTES = 4
+_STAMP_BYTES = 8
+"""header.stamp: int32 sec, uint32 nanosec; the frame_id follows."""
 _MAX_SEQUENCE = 2**31
 """Longer sequences than rosbags accepts (its default ``max_sequence_length``) are left to rosbags."""
 _KNOWN_NAME_LISTS = 8
@@ -56,39 +58,61 @@ class JointStateCdr:
 
     def __init__(self) -> None:
         self._known: list[tuple[bytes, tuple[str, ...]]] = []
-        """The latest distinct name lists and their bytes, newest first (two publishers on one topic
-        alternate between theirs)."""
+        """The latest distinct name lists, newest first, each with the bytes from the header's frame_id to
+        its last name (two publishers on one topic alternate between theirs): a message starting with
+        those bytes after its stamp has those names."""
 
     def read(self, raw: bytes | memoryview) -> JointStateArrays | None:
         """The message's names and arrays, or ``None`` when the bytes are not a whole little-endian
         CDR JointState (rosbags then says why)."""
-        data = bytes(raw)  # one copy of a few hundred bytes: bytes compare and slice faster than views
-        if not data.startswith(_CDR_LE) or len(data) < _ENCAPSULATION_BYTES:
+        body = _body(raw)
+        if body is None:
             return None
-        body = data[_ENCAPSULATION_BYTES:]
         try:
             return self._read(body)
         except (struct.error, ValueError, UnicodeDecodeError):
             return None
 
-    def _read(self, body: bytes) -> JointStateArrays | None:
-        pos = 8  # header.stamp: int32 sec, uint32 nanosec
+    def names(self, raw: bytes | memoryview) -> tuple[str, ...] | None:
+        """Only the message's joint names (``None`` as for :meth:`read`): whether a message is a sample
+        of a stream that selects joints, asked of every message of the topic, so known names are found
+        without copying the message."""
+        data = raw if isinstance(raw, bytes) else bytes(raw)
+        if data.startswith(_CDR_LE):
+            for region, names in self._known:
+                if data.startswith(region, _ENCAPSULATION_BYTES + _STAMP_BYTES):
+                    return names
+        body = _body(data)
+        if body is None:
+            return None
+        try:
+            found = self._names(body)
+        except (struct.error, ValueError, UnicodeDecodeError):
+            return None
+        return None if found is None else found[0]
+
+    def _names(self, body: bytes) -> tuple[tuple[str, ...], int] | None:
+        """The names and the offset after them."""
+        for region, names in self._known:
+            if body.startswith(region, _STAMP_BYTES):
+                return names, _STAMP_BYTES + len(region)
+        pos = _STAMP_BYTES
         frame_id_bytes = _U32.unpack_from(body, pos)[0]
         if not _whole_string(body, pos, frame_id_bytes):
             return None
         pos = _aligned(pos + 4 + frame_id_bytes, 4)
         count = _U32.unpack_from(body, pos)[0]
-        pos += 4
-        names = next((k for k in self._known if len(k[1]) == count and body.startswith(k[0], pos)), None)
-        if names is not None:
-            pos += len(names[0])
-        else:
-            parsed = self._names_at(body, pos, count)
-            if parsed is None:
-                return None
-            names = (body[pos : parsed[0]], parsed[1])
-            pos = parsed[0]
-            self._known = [names, *self._known[: _KNOWN_NAME_LISTS - 1]]
+        parsed = self._names_at(body, pos + 4, count)
+        if parsed is None:
+            return None
+        self._known = [(body[_STAMP_BYTES : parsed[0]], parsed[1]), *self._known[: _KNOWN_NAME_LISTS - 1]]
+        return parsed[1], parsed[0]
+
+    def _read(self, body: bytes) -> JointStateArrays | None:
+        found = self._names(body)
+        if found is None:
+            return None
+        names, pos = found
         arrays = []
         for _ in range(3):  # position, velocity, effort
             pos = _aligned(pos, 4)
@@ -102,7 +126,7 @@ class JointStateCdr:
             pos += size * 8
         if pos + 3 < len(body):  # rosbags' size check: more than padding left over
             return None
-        return JointStateArrays(names[1], *arrays)
+        return JointStateArrays(names, *arrays)
 
     @staticmethod
     def _names_at(body: bytes, pos: int, count: int) -> tuple[int, tuple[str, ...]] | None:
@@ -117,6 +141,14 @@ class JointStateCdr:
             names.append(body[pos + 4 : pos + 3 + length].decode())
             pos += 4 + length
         return pos, tuple(names)
+
+
+def _body(raw: bytes | memoryview) -> bytes | None:
+    """The CDR body after the encapsulation header, when little-endian."""
+    data = bytes(raw)  # one copy of a few hundred bytes: bytes compare and slice faster than views
+    if not data.startswith(_CDR_LE) or len(data) < _ENCAPSULATION_BYTES:
+        return None
+    return data[_ENCAPSULATION_BYTES:]
 
 
 def _whole_string(body: bytes, pos: int, length: int) -> bool:

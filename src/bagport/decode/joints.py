@@ -28,7 +28,7 @@ import numpy.typing as npt
 from bagport.decode.paths import Vector, VectorExtractor, paths_extractor, resolve_path
 from bagport.errors import DecodeError
 
-__all__ = ["joint_state_extractor", "joint_trajectory_extractor", "multi_dof_extractor"]
+__all__ = ["joint_state_extractor", "joint_trajectory_extractor", "multi_dof_extractor", "selected_joints"]
 
 _STATE_FIELDS = {"position": "position", "velocity": "velocity", "effort": "effort"}
 _POINT_FIELDS = {
@@ -63,6 +63,11 @@ _SHARED_TOPIC_FIX = (
     "bagport reads one set of joints per topic: record the merged joint states on one topic "
     "(joint_state_publisher's source_list), or remap each publisher to a topic of its own and map each in its own "
     "contract entry."
+)
+_SHARED_JOINT_STATE_FIX = (
+    "list the joints in selector.names: an entry then reads only the messages naming all its joints. Give each "
+    "publisher's joints an entry of their own with the same key (their values are concatenated in declaration "
+    "order)."
 )
 
 
@@ -115,7 +120,7 @@ class _ByName:
                 ", though earlier messages on the topic had them: publishers with different joints share the "
                 "topic (an arm's and a gripper's driver, say)"
             )
-            return DecodeError(said, topic=self._topic, fix=_SHARED_TOPIC_FIX)
+            return DecodeError(said, topic=self._topic, fix=self._shared_fix)
         if not names:
             fix = (
                 "fix selector.names in the contract to use joint names the robot publishes; it publishes none: "
@@ -124,9 +129,13 @@ class _ByName:
         else:
             fix = (
                 "fix selector.names in the contract to use joint names the robot publishes; if other messages on "
-                f"this topic carry them, {_SHARED_TOPIC_FIX}"
+                f"this topic carry them, {self._shared_fix}"
             )
         return DecodeError(said, topic=self._topic, fix=fix)
+
+    @property
+    def _shared_fix(self) -> str:
+        return _SHARED_JOINT_STATE_FIX if self._what == "JointState" else _SHARED_TOPIC_FIX
 
     def __call__(self, msg: Any) -> Vector:
         names = self._names_of(msg)
@@ -143,6 +152,12 @@ class _ByName:
                 )
             out[self._slots[group]] = values[index[group]]
         return out
+
+
+def selected_joints(names: tuple[str, ...]) -> tuple[str, ...]:
+    """The joints a JointState selector list names (``position.j1`` and ``j1`` name ``j1``; an index such
+    as ``position[0]`` names none), each once, in order."""
+    return tuple(dict.fromkeys(_parse(n, _STATE_FIELDS).joint for n in names if not _STATE_INDEX.match(n)))
 
 
 def joint_state_extractor(topic: str, names: tuple[str, ...], first_msg: Any) -> VectorExtractor:

@@ -26,12 +26,12 @@ from bagport.decode import (
     ImageKind,
     VectorExtractor,
     decode_image,
-    find_transform,
     make_extractor,
     resize_image,
 )
 from bagport.decode.joint_state_cdr import JointStateCdr, joint_state_reader
 from bagport.episode.alignment import AlignedSource
+from bagport.episode.samples import sample_tests
 from bagport.episode.video import VideoFeed
 from bagport.errors import AlignmentError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
@@ -163,8 +163,13 @@ def _decode(source: _SourceStream, message: BagMessage) -> Any:
 
 def _at_entry(err: DecodeError, src: SourceSpec, contract_name: str) -> DecodeError:
     """The error naming the contract entry whose selector or decoder met the message."""
-    entry = f"{src.where(contract_name)}, {src.section}[key={src.key}]"
-    return DecodeError(f"{err.what} ({entry})", uri=err.uri, topic=err.topic, t_ns=err.t_ns, fix=err.fix)
+    return DecodeError(
+        f"{err.what} ({src.entry_text(contract_name)})",
+        uri=err.uri,
+        topic=err.topic,
+        t_ns=err.t_ns,
+        fix=err.fix,
+    )
 
 
 class _Streaming:
@@ -188,7 +193,9 @@ class _Streaming:
             for s in self.streams
             if s.source.kind is FeatureKind.VIDEO and s.src.msgtype in VIDEO_TYPES
         }
-        self.filters = {s.stream: f for s in self.streams if (f := s.src.stream_filter) is not None}
+        self.filters = sample_tests(
+            {s.stream: f for s in self.streams if (f := s.src.stream_filter) is not None}
+        )
         self.arrived = {stream: 0 for streams in self.by_topic.values() for stream in streams}
         self.by_key = {f.key: [s for s in self.streams if s.src.key == f.key] for f in features}
         self.features = features
@@ -250,11 +257,8 @@ class _Streaming:
                 self.arrived[stream] = self._push_video(streams, message)
                 wanted = True
                 continue
-            spec = self.filters.get(stream)
-            if (
-                spec is not None
-                and find_transform(message.msg(), spec.child_frame, spec.parent_frame) is None
-            ):
+            test = self.filters.get(stream)
+            if test is not None and not test.carries(message):
                 continue  # the same test as the timeline's: this message is no sample of the stream
             index = self.arrived[stream]
             self.arrived[stream] = index + 1

@@ -17,8 +17,8 @@ import numpy.typing as npt
 from bagport.bags import BagMessage, BagReader
 from bagport.contract import ContractPlan, FeatureKind
 from bagport.contract.plan import StreamFilter
-from bagport.decode import child_frames, find_transform, transform_stamp_ns
 from bagport.decode.video import KeyframeGate, video_packet
+from bagport.episode.samples import SampleTest, sample_tests
 from bagport.episode.video import keyframe_before
 from bagport.errors import AlignmentError, BagReadError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
@@ -76,15 +76,21 @@ class Timeline:
 def _publish_times(
     reader: BagReader,
     log: dict[str, list[int]],
-    topics: tuple[str, ...],
-    start_ns: int | None,
-    stop_ns: int | None,
+    streams: Mapping[str, str],
+    samples: Mapping[str, list[int]],
+    window: tuple[int | None, int | None],
     skipped: Mapping[str, int],
 ) -> dict[str, Int64Array]:
-    """MCAP publish times of ``topics`` logged in ``[start_ns, stop_ns)`` (minus a video stream's
-    ``skipped`` packets before its first key frame), checked message by message against the log times read."""
+    """MCAP publish times of ``streams`` (a stream -> its topic) logged in the ``window`` ``[start, stop)``
+    (minus a video stream's ``skipped`` packets before its first key frame; a filtered stream's are its
+    ``samples``' positions in its topic), checked message by message against the log times read."""
     out: dict[str, Int64Array] = {}
-    for topic, (all_log_ns, all_publish_ns) in reader.publish_times_ns(topics).items():
+    start_ns, stop_ns = window
+    by_topic = reader.publish_times_ns(tuple(dict.fromkeys(streams.values())))
+    for stream, topic in streams.items():
+        if topic not in by_topic:  # no publish times in this bag: the alignment says so
+            continue
+        all_log_ns, all_publish_ns = by_topic[topic]
         inside = np.ones(all_log_ns.shape, dtype=bool)
         if start_ns is not None:
             inside &= all_log_ns >= start_ns
@@ -92,31 +98,24 @@ def _publish_times(
             inside &= all_log_ns < stop_ns
         first = skipped.get(topic, 0)
         log_ns, publish_ns = all_log_ns[inside][first:], all_publish_ns[inside][first:]
-        if not np.array_equal(log_ns, np.asarray(log[topic], dtype=np.int64)):
+        if stream in samples:
+            positions = np.asarray(samples[stream], dtype=np.intp)
+            positions = positions[positions < log_ns.size]  # a missing one: the lengths differ below
+            log_ns, publish_ns = log_ns[positions], publish_ns[positions]
+        if not np.array_equal(log_ns, np.asarray(log[stream], dtype=np.int64)):
             raise BagReadError(
                 "the publish times read with the mcap library do not line up with the log times",
                 uri=reader.info.uri,
                 topic=topic,
                 fix="use 'align: {stamp: receive}' or 'stamp: header' for this topic.",
             )
-        out[topic] = publish_ns
+        out[stream] = publish_ns
     return out
 
 
 def _task_message(message: BagMessage) -> TaskMessage:
     stamp = message.header_stamp_ns()
     return TaskMessage(stamp if stamp else message.log_time_ns, str(message.msg().data))
-
-
-def _filtered_stamp(message: BagMessage, spec: StreamFilter, seen: dict[str, None]) -> int | None:
-    """The transform's header stamp when the message carries it, else ``None`` (not a sample)."""
-    msg = message.msg()
-    transform = find_transform(msg, spec.child_frame, spec.parent_frame)
-    if transform is None:
-        if len(seen) < 50:
-            seen.update(dict.fromkeys(child_frames(msg)))
-        return None
-    return transform_stamp_ns(transform)
 
 
 def _video_gates(
@@ -142,12 +141,12 @@ def _admitted(message: BagMessage, gate: KeyframeGate, uri: str) -> bool:
 def _check_samples_found(
     uri: str,
     gates: Mapping[str, KeyframeGate],
-    filters: Mapping[str, StreamFilter],
+    tests: Mapping[str, SampleTest],
     log: Mapping[str, list[int]],
-    frames_seen: Mapping[str, None],
     window_ns: WindowNs | None,
+    entries: Mapping[str, str],
 ) -> None:
-    """Every video stream has a key frame, every filtered stream a message carrying its transform."""
+    """Every video stream has a key frame, every filtered stream a message that is its sample."""
     for topic, gate in gates.items():
         if gate.skipped and not log[topic]:
             raise AlignmentError(
@@ -159,15 +158,14 @@ def _check_samples_found(
                 fix="record the camera with periodic key frames (the encoder's GOP / keyint setting), "
                 "or leave the topic out of the contract.",
             )
-    for stream, spec in filters.items():
+    for stream, test in tests.items():
         if stream in log and not log[stream]:
+            entry = f" ({entries[stream]})" if stream in entries else ""
             raise AlignmentError(
-                f"no message on {spec.topic} carries a transform to child frame {spec.child_frame!r}"
-                + (f" from {spec.parent_frame!r}" if spec.parent_frame else "")
-                + f" (transforms seen: {', '.join(frames_seen) or 'none'})",
+                f"no message on {test.spec.topic} carries {test.wanted()} ({test.seen_text()}){entry}",
                 uri=uri,
-                topic=spec.topic,
-                fix="set selector.child_frame (and parent_frame) to a frame the bag publishes.",
+                topic=test.spec.topic,
+                fix=test.fix(),
             )
 
 
@@ -201,22 +199,27 @@ def scan_timeline(
     publish_topics: Iterable[str] = (),
     window_ns: WindowNs | None = None,
     video_topics: Iterable[str] = (),
+    entries: Mapping[str, str] | None = None,
 ) -> Timeline:
     """Stamps of every stream; ``topics`` are stream names (see ``SourceSpec.stream``): a topic, or a
-    name in ``filters`` whose samples are only the messages of its topic carrying its transform.
-    MCAP publish times too for ``publish_topics`` (``stamp: publish``; unfiltered streams only).
+    name in ``filters`` whose samples are only some messages of its topic (:mod:`bagport.episode.samples`).
+    MCAP publish times too for the streams in ``publish_topics`` (``stamp: publish``).
     The samples of ``video_topics`` are their packets from a key frame on (:mod:`bagport.episode.video`).
+    ``entries`` names the contract entry of a filtered stream in its error when no message is its sample.
     With ``window_ns`` (log time, inclusive) only the messages inside it, plus the task prompts
     before it (a prompt holds until the next). The reader checks the counts against the bag's index."""
     feature_topics = tuple(topics)
-    filters = dict(filters or {})
+    tests = sample_tests(dict(filters or {}))
     task_set = frozenset(task_topics)
     log: dict[str, list[int]] = {t: [] for t in feature_topics}
     header: dict[str, list[int | None]] = {t: [] for t in feature_topics}
+    topic_of = {stream: tests[stream].spec.topic if stream in tests else stream for stream in feature_topics}
     by_topic: dict[str, list[str]] = {}
     for stream in feature_topics:
-        by_topic.setdefault(filters[stream].topic if stream in filters else stream, []).append(stream)
-    frames_seen: dict[str, None] = {}
+        by_topic.setdefault(topic_of[stream], []).append(stream)
+    publish = {stream: topic_of[stream] for stream in dict.fromkeys(publish_topics)}
+    positions: dict[str, list[int]] = {stream: [] for stream in publish if stream in tests}
+    counted: dict[str, int] = dict.fromkeys((topic_of[stream] for stream in positions), 0)
     tasks: list[TaskMessage] = []
     start_ns, stop_ns = (None, None) if window_ns is None else (window_ns[0], window_ns[1] + 1)
     if start_ns is not None and task_set:
@@ -230,20 +233,25 @@ def scan_timeline(
         if gate is not None and not _admitted(message, gate, reader.info.uri):
             continue
         for stream in by_topic.get(message.topic, ()):
-            spec = filters.get(stream)
-            stamp_ns = (
-                message.header_stamp_ns() if spec is None else _filtered_stamp(message, spec, frames_seen)
-            )
-            if spec is not None and stamp_ns is None:
+            test = tests.get(stream)
+            if test is None:
+                stamp_ns = message.header_stamp_ns()
+            elif test.carries(message):
+                stamp_ns = test.stamp_ns(message)
+                if stream in positions:
+                    positions[stream].append(counted[message.topic])
+            else:
                 continue
             log[stream].append(message.log_time_ns)
             header[stream].append(stamp_ns)
-    _check_samples_found(reader.info.uri, gates, filters, log, frames_seen, window_ns)
+        if message.topic in counted:
+            counted[message.topic] += 1
+    _check_samples_found(reader.info.uri, gates, tests, log, window_ns, entries or {})
     skipped = {topic: gate.skipped for topic, gate in gates.items()}
-    publish = _publish_times(reader, log, tuple(dict.fromkeys(publish_topics)), start_ns, stop_ns, skipped)
+    publish_ns = _publish_times(reader, log, publish, positions, (start_ns, stop_ns), skipped)
     result = {
         topic: _topic_timeline(
-            topic, log[topic], header[topic], publish.get(topic), gates.get(topic), prerolls.get(topic)
+            topic, log[topic], header[topic], publish_ns.get(topic), gates.get(topic), prerolls.get(topic)
         )
         for topic in feature_topics
     }
@@ -257,7 +265,7 @@ def scan_plan_timeline(reader: BagReader, plan: ContractPlan, window_ns: WindowN
         plan.streams(),
         [t.topic for t in plan.task_topics],
         plan.stream_filters(),
-        [s.stream for s in plan.sources if s.stamp == "publish" and s.child_frame is None],
+        [s.stream for s in plan.sources if s.stamp == "publish"],
         window_ns,
         [
             s.topic
@@ -266,4 +274,5 @@ def scan_plan_timeline(reader: BagReader, plan: ContractPlan, window_ns: WindowN
             for s in f.sources
             if s.msgtype in VIDEO_TYPES
         ],
+        {s.stream: s.entry_text(plan.source_name) for s in reversed(plan.sources) if s.stream_filter},
     )

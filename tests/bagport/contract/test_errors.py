@@ -141,8 +141,9 @@ def test_selector_naming_a_joint_no_message_has(bag: str) -> None:
     )
     with pytest.raises(
         ContractError,
-        match=r"^robot\.yaml:3 \(observations\[key=observation\.state\]\.selector\): joint\(s\) \['elbow'\] not "
-        r"in this JointState message \(it has \['j1', 'j2', 'j3', 'j4', 'j5', 'j6'\]\)",
+        match=r"^robot\.yaml:3 \(observations\[key=observation\.state\]\.selector\.names\): no message on "
+        r"/joint_states in .* carries all of the joints \['j1', 'elbow'\] \(no message names \['elbow'\]; joint lists "
+        r"seen: \['j1', 'j2', 'j3', 'j4', 'j5', 'j6'\]",
     ):
         describe_features(parse_contract(text, "robot.yaml"), bag)
 

@@ -65,10 +65,12 @@ def test_joint_state_without_selector_takes_all_positions_in_first_order() -> No
 
 
 def test_joints_that_another_publisher_on_the_topic_sends_are_said_to_be() -> None:
-    """An arm's and a gripper's driver both on /joint_states: the gripper's message lacks the arm's joints
-    the first messages had; the error says the topic is shared, not that the contract names wrong joints."""
+    """An arm's and a gripper's driver both on /joint_states, and an entry without selector.names (every joint
+    of the first message): the gripper's message lacks the arm's joints the first messages had; the error says
+    the topic is shared and that naming the joints fixes it (an entry naming its joints reads only the messages
+    naming them: tests/bagport/episode/test_samples.py)."""
     arm = _joint_state(["j1", "j2"], [1.0, 2.0])
-    extractor = make_extractor(_src("sensor_msgs/msg/JointState", ("position.j1", "position.j2")), arm)
+    extractor = make_extractor(_src("sensor_msgs/msg/JointState"), arm)
     assert extractor(arm).tolist() == [1.0, 2.0]
     with pytest.raises(DecodeError) as caught:
         extractor(_joint_state(["j3"], [0.5]))
@@ -77,7 +79,7 @@ def test_joints_that_another_publisher_on_the_topic_sends_are_said_to_be() -> No
         "joint(s) ['j1', 'j2'] not in this JointState message (it has ['j3']), though earlier messages"
         in said
     )
-    assert "Fix: bagport reads one set of joints per topic: record the merged joint states" in said
+    assert "Fix: list the joints in selector.names: an entry then reads only the messages naming all" in said
     assert "fix selector.names" not in said
     fresh = make_extractor(_src("sensor_msgs/msg/JointState", ("position.j1",)), arm)
     with pytest.raises(

@@ -72,7 +72,9 @@ def test_positions_by_index_through_the_pipeline(tmp_path: Path, storage: Litera
 
 def test_a_joint_name_on_a_nameless_robot_says_select_by_index(tmp_path: Path) -> None:
     bag = _bag(tmp_path / "nameless", "mcap")
-    with pytest.raises(ContractError, match=r"it publishes none: select by index, e.g. 'position\[0\]'"):
+    with pytest.raises(
+        ContractError, match=r"the robot publishes no joint names: select by index, e.g. 'position\[0\]'"
+    ):
         describe_features(parse_contract(_contract("{names: [position.elbow]}"), "c.yaml"), str(bag))
 
 

@@ -108,9 +108,10 @@ def test_selector_that_does_not_fit_names_the_contract_line(tmp_path: Path) -> N
     text = SAMPLE_CONTRACT.read_text().replace("position.j6]", "position.j9]", 1)
     line = 1 + text.splitlines().index("  - key: observation.state")
     with pytest.raises(
-        DecodeError,
-        match=rf"\['j9'\] not in .*\(contract\.yaml:{line}, observations\[key=observation\.state\]\)"
-        r" \[topic=/joint_states, t_ns=\d+\]",
+        AlignmentError,
+        match=r"no message on /joint_states carries all of the joints \[.*'j9'\] \(no message names \['j9'\]; "
+        rf"joint lists seen: .*\) \(contract\.yaml:{line}, observations\[key=observation\.state\]\)"
+        r" \[topic=/joint_states\]",
     ):
         convert_episode(_request(bag, tmp_path / "staging", text))
     assert not (tmp_path / "staging").exists()

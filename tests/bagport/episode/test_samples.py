@@ -1,0 +1,133 @@
+"""Publishers with different joints on one JointState topic (an arm's and a gripper's driver on
+/joint_states, as robot_state_publisher accepts them): an entry naming joints reads only the messages
+naming all of them, in pass 1, pass 2 and the contract check, in every storage format."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pytest
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+from bagport.bags import open_bag
+from bagport.contract import parse_contract
+from bagport.episode.timeline import scan_plan_timeline
+from bagport.errors import AlignmentError, ContractError
+from bagport.feature_table import describe_features
+from tests.bagport.decode.bagwriter import write_bag
+from tests.helpers import convert_in_process
+
+TS = get_typestore(Stores.ROS2_HUMBLE)
+TS1 = get_typestore(Stores.ROS1_NOETIC)  # a ROS 1 header has a seq before its stamp
+FPS = 10
+FRAMES = 12
+START_NS = 1_700_000_000_000_000_000
+PERIOD_NS = 1_000_000_000 // FPS
+GRIPPER_LAG_NS = 30_000_000
+JOINT_STATE = "sensor_msgs/msg/JointState"
+
+
+def _joint_state(store: Typestore, t_ns: int, names: list[str], positions: list[float]) -> Any:
+    types = store.types
+    stamp = types["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
+    header = types["std_msgs/msg/Header"]
+    return types[JOINT_STATE](
+        header=header(seq=0, stamp=stamp, frame_id="") if store is TS1 else header(stamp=stamp, frame_id=""),
+        name=names,
+        position=np.array(positions, dtype=np.float64),
+        velocity=np.array([], dtype=np.float64),
+        effort=np.array([], dtype=np.float64),
+    )
+
+
+def _bag(path: Path, storage: Literal["mcap", "sqlite3", "ros1"]) -> Path:
+    """The arm (j1, j2: k, -k) at the ticks, the gripper (g: 100 + k) 30 ms after each, on one topic."""
+    store = TS1 if storage == "ros1" else TS
+    messages = []
+    for k in range(FRAMES):
+        t_ns = START_NS + k * PERIOD_NS
+        messages.append((t_ns, _joint_state(store, t_ns, ["j1", "j2"], [k, -k])))
+        gripper_ns = t_ns + GRIPPER_LAG_NS
+        messages.append((gripper_ns, _joint_state(store, gripper_ns, ["g"], [100.0 + k])))
+    return write_bag(path, storage, store, [("/joint_states", JOINT_STATE, messages)])
+
+
+def _entry(key: str, names: str, stamp: str = "header") -> str:
+    return (
+        f"  - key: {key}\n    topic: /joint_states\n    type: {JOINT_STATE}\n    dtype: float64\n"
+        f"    selector: {{names: {names}}}\n    align: {{strategy: hold, stamp: {stamp}}}\n"
+    )
+
+
+def _contract(stamp: str = "header") -> str:
+    return (
+        f"robot_type: two_drivers\nfps: {FPS}\ndefault_task: hold the cube\nobservations:\n"
+        + _entry("observation.state", "[position.j1, j2]", stamp)
+        + _entry("observation.state", "[g]", stamp)
+        + _entry("observation.elbow", "[j2]", stamp)
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("storage", ["mcap", "sqlite3", "ros1"])
+def test_each_entry_reads_the_messages_naming_its_joints(
+    tmp_path: Path, storage: Literal["mcap", "sqlite3", "ros1"]
+) -> None:
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+
+    bag = _bag(tmp_path / "shared", storage)
+    stamp = "publish" if storage == "mcap" else "header"
+    rows = {row.key: row for row in describe_features(parse_contract(_contract(stamp), "c.yaml"), str(bag))}
+    assert rows["observation.state"].names == ("position.j1", "j2", "g")
+    out = convert_in_process(str(bag), _contract(stamp), tmp_path)
+    dataset = LeRobotDataset("test/shared", root=out)
+    # the grid runs from the first gripper message (30 ms after the arm's) to the arm's last message
+    frames = FRAMES - 1
+    assert dataset.meta.total_frames == frames
+    state = np.stack([dataset[k]["observation.state"].numpy() for k in range(frames)])
+    elbow = np.stack([dataset[k]["observation.elbow"].numpy().reshape(-1) for k in range(frames)])
+    expected = np.array([[k, -k, 100.0 + k] for k in range(frames)])
+    np.testing.assert_array_equal(state, expected)
+    np.testing.assert_array_equal(elbow[:, 0], expected[:, 1])
+
+
+def test_the_streams_are_named_by_their_joints_only_when_entries_differ(tmp_path: Path) -> None:
+    bag = _bag(tmp_path / "shared", "mcap")
+    plan = parse_contract(_contract(), "c.yaml")
+    assert plan.streams() == ("/joint_states#j1,j2", "/joint_states#g", "/joint_states#j2")
+    with open_bag(str(bag)) as reader:
+        timeline = scan_plan_timeline(reader, plan)
+    arm, gripper = timeline.topics["/joint_states#j1,j2"], timeline.topics["/joint_states#g"]
+    ticks = START_NS + PERIOD_NS * np.arange(FRAMES)
+    np.testing.assert_array_equal(arm.log_ns, ticks)
+    np.testing.assert_array_equal(gripper.log_ns, ticks + GRIPPER_LAG_NS)
+    assert gripper.header_ns is not None
+    np.testing.assert_array_equal(gripper.header_ns, ticks + GRIPPER_LAG_NS)
+    alone = parse_contract(
+        f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "[j1]"), "c"
+    )
+    assert alone.streams() == ("/joint_states",)  # one selection on the topic: its name stays the topic's
+
+
+@pytest.mark.parametrize("storage", ["mcap", "ros1"])
+def test_an_entry_whose_joints_no_message_names_together_says_to_split_it(
+    tmp_path: Path, storage: Literal["mcap", "ros1"]
+) -> None:
+    bag = _bag(tmp_path / "shared", storage)
+    text = f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "[j1, g]")
+    plan = parse_contract(text, "c.yaml")
+    with pytest.raises(ContractError) as caught:
+        describe_features(plan, str(bag))
+    said = str(caught.value)
+    assert "no message on /joint_states" in said
+    assert "carries all of the joints ['j1', 'g'] (joint lists seen: ['j1', 'j2'], ['g'])" in said
+    assert caught.value.field == "observations[key=observation.state].selector.names"
+    assert "give each publisher's joints their own entry with the same key" in said
+    with (
+        open_bag(str(bag)) as reader,
+        pytest.raises(AlignmentError, match=r"joint lists seen: \['j1', 'j2'\]"),
+    ):
+        scan_plan_timeline(reader, plan)

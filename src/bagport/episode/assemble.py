@@ -193,8 +193,12 @@ class _Streaming:
             for s in self.streams
             if s.source.kind is FeatureKind.VIDEO and s.src.msgtype in VIDEO_TYPES
         }
-        self.filters = sample_tests(
-            {s.stream: f for s in self.streams if (f := s.src.stream_filter) is not None}
+        self.filters = sample_tests(  # only where pass 1 found messages of the topic that are not samples
+            {
+                s.stream: f
+                for s in self.streams
+                if (f := s.src.stream_filter) and s.source.timeline.passed_over
+            }
         )
         self.arrived = {stream: 0 for streams in self.by_topic.values() for stream in streams}
         self.by_key = {f.key: [s for s in self.streams if s.src.key == f.key] for f in features}

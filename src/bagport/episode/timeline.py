@@ -9,7 +9,7 @@ Task prompts (small strings) are collected here too.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import numpy.typing as npt
@@ -44,6 +44,9 @@ class TopicTimeline:
     preroll_ns: tuple[int, int] | None = None
     """Video streams in a window that starts inside a GOP: the log times ``[key frame, window start)``
     to decode before the window (frames dropped), so that every packet in the window decodes."""
+    passed_over: int = 0
+    """A filtered stream: its topic's messages that were not its samples (0: every message was one, so
+    pass 2 need not ask again)."""
 
     @property
     def count(self) -> int:
@@ -219,6 +222,7 @@ def scan_timeline(
         by_topic.setdefault(topic_of[stream], []).append(stream)
     publish = {stream: topic_of[stream] for stream in dict.fromkeys(publish_topics)}
     positions: dict[str, list[int]] = {stream: [] for stream in publish if stream in tests}
+    passed_over = dict.fromkeys(tests, 0)
     counted: dict[str, int] = dict.fromkeys((topic_of[stream] for stream in positions), 0)
     tasks: list[TaskMessage] = []
     start_ns, stop_ns = (None, None) if window_ns is None else (window_ns[0], window_ns[1] + 1)
@@ -241,6 +245,7 @@ def scan_timeline(
                 if stream in positions:
                     positions[stream].append(counted[message.topic])
             else:
+                passed_over[stream] += 1
                 continue
             log[stream].append(message.log_time_ns)
             header[stream].append(stamp_ns)
@@ -255,6 +260,9 @@ def scan_timeline(
         )
         for topic in feature_topics
     }
+    for stream, count in passed_over.items():
+        if stream in result:
+            result[stream] = replace(result[stream], passed_over=count)
     return Timeline(topics=result, tasks=tuple(tasks))
 
 

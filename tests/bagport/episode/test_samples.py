@@ -106,6 +106,7 @@ def test_the_streams_are_named_by_their_joints_only_when_entries_differ(tmp_path
     np.testing.assert_array_equal(gripper.log_ns, ticks + GRIPPER_LAG_NS)
     assert gripper.header_ns is not None
     np.testing.assert_array_equal(gripper.header_ns, ticks + GRIPPER_LAG_NS)
+    assert (arm.passed_over, gripper.passed_over) == (FRAMES, FRAMES)  # pass 2 asks again: the other's
     alone = parse_contract(
         f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "[j1]"), "c"
     )

@@ -9,7 +9,7 @@ contract check ask the same question through one :class:`SampleTest` per stream.
 from __future__ import annotations
 
 from bagport.bags import BagMessage
-from bagport.contract.plan import StreamFilter, TransformFilter
+from bagport.contract.plan import JointFilter, StreamFilter, TransformFilter
 from bagport.decode import child_frames, find_transform, transform_stamp_ns
 from bagport.decode.joint_state_cdr import JointStateCdr
 
@@ -23,66 +23,105 @@ _NAME_LISTS_KEPT = 8
 class SampleTest:
     """One filtered stream: whether a message is a sample, its stamp, and what the topic had instead."""
 
+    field = "selector.names"
+    """The contract field to fix when no message is a sample."""
+
     def __init__(self, spec: StreamFilter) -> None:
         self.spec = spec
         self.seen: dict[str, None] = {}
-        """Transforms (``parent -> child``) or joint lists of the messages that were not samples."""
-        self._names = JointStateCdr()
+        """What the messages that were not samples had instead (transforms, joint lists)."""
+
+    def carries(self, message: BagMessage) -> bool:
+        """Whether ``message`` (on the filter's topic) is a sample of the stream."""
+        raise NotImplementedError
+
+    def stamp_ns(self, message: BagMessage) -> int | None:
+        """The sample's header stamp, once :meth:`carries` said yes."""
+        return message.header_stamp_ns()
+
+    def wanted(self) -> str:
+        """What a sample carries, for errors: ``a transform to child frame 'tool0'``."""
+        raise NotImplementedError
+
+    def seen_text(self) -> str:
+        """What the topic's messages had instead, for errors."""
+        raise NotImplementedError
+
+    def fix(self) -> str:
+        raise NotImplementedError
+
+
+class _TransformTest(SampleTest):
+    field = "selector.child_frame"
+
+    def __init__(self, spec: TransformFilter) -> None:
+        super().__init__(spec)
+        self._child, self._parent = spec.child_frame, spec.parent_frame
+
+    def carries(self, message: BagMessage) -> bool:
+        msg = message.msg()
+        if find_transform(msg, self._child, self._parent) is not None:
+            return True
+        if len(self.seen) < _SEEN_KEPT:
+            self.seen.update(dict.fromkeys(child_frames(msg)))
+        return False
+
+    def stamp_ns(self, message: BagMessage) -> int | None:
+        """The transform's own header stamp."""
+        transform = find_transform(message.msg(), self._child, self._parent)
+        return None if transform is None else transform_stamp_ns(transform)
+
+    def wanted(self) -> str:
+        parent = f" from {self._parent!r}" if self._parent else ""
+        return f"a transform to child frame {self._child!r}{parent}"
+
+    def seen_text(self) -> str:
+        return f"transforms seen: {', '.join(self.seen) or 'none'}"
+
+    def fix(self) -> str:
+        return "set selector.child_frame (and parent_frame) to a frame the bag publishes."
+
+
+class _JointTest(SampleTest):
+    def __init__(self, spec: JointFilter) -> None:
+        super().__init__(spec)
+        self._joints = spec.joints
+        self._reader = JointStateCdr()
+        self._last: tuple[tuple[str, ...] | None, bool] = (None, False)
         self._recent: list[tuple[tuple[str, ...], bool]] = []
         """The latest name lists (one per publisher, usually) and whether they name the stream's joints."""
         self._joints_seen: set[str] = set()
 
     def carries(self, message: BagMessage) -> bool:
-        """Whether ``message`` (on the filter's topic) is a sample of the stream."""
-        if isinstance(self.spec, TransformFilter):
-            msg = message.msg()
-            if find_transform(msg, self.spec.child_frame, self.spec.parent_frame) is not None:
-                return True
-            if len(self.seen) < _SEEN_KEPT:
-                self.seen.update(dict.fromkeys(child_frames(msg)))
-            return False
-        return self._names_joints(message, self.spec.joints)
-
-    def stamp_ns(self, message: BagMessage) -> int | None:
-        """The sample's header stamp (a transform's own for TF), once :meth:`carries` said yes."""
-        if isinstance(self.spec, TransformFilter):
-            transform = find_transform(message.msg(), self.spec.child_frame, self.spec.parent_frame)
-            return None if transform is None else transform_stamp_ns(transform)
-        return message.header_stamp_ns()
-
-    def _names_joints(self, message: BagMessage, joints: tuple[str, ...]) -> bool:
         raw = message.cdr
-        names = None if raw is None else self._names.names(raw)
+        names = None if raw is None else self._reader.names(raw)
+        last_names, last_carries = self._last
+        if (
+            names is not None and names is last_names
+        ):  # the reader hands back the same tuple for the same names
+            return last_carries
         if names is None:  # ROS 1, big-endian, or bytes rosbags must judge
             names = tuple(message.msg().name)
-        for known, carries in self._recent:  # the reader hands back the same tuple for the same names
-            if known is names:
-                return carries
-        carries = set(joints) <= set(names)
-        self._joints_seen.update(names)
-        if not carries and len(self.seen) < _SEEN_KEPT:
-            self.seen[str(list(names))] = None
-        self._recent = [(names, carries), *self._recent[: _NAME_LISTS_KEPT - 1]]
+        carries = next((c for known, c in self._recent if known is names), None)
+        if carries is None:
+            carries = set(self._joints) <= set(names)
+            self._joints_seen.update(names)
+            if not carries and len(self.seen) < _SEEN_KEPT:
+                self.seen[str(list(names))] = None
+            self._recent = [(names, carries), *self._recent[: _NAME_LISTS_KEPT - 1]]
+        self._last = (names, carries)
         return carries
 
     def wanted(self) -> str:
-        """What a sample carries, for errors: ``a transform to child frame 'tool0'``."""
-        if isinstance(self.spec, TransformFilter):
-            parent = f" from {self.spec.parent_frame!r}" if self.spec.parent_frame else ""
-            return f"a transform to child frame {self.spec.child_frame!r}{parent}"
-        return f"all of the joints {list(self.spec.joints)}"
+        return f"all of the joints {list(self._joints)}"
 
     def seen_text(self) -> str:
-        """What the topic's messages had instead; for joints, also those no message names at all."""
-        if isinstance(self.spec, TransformFilter):
-            return f"transforms seen: {', '.join(self.seen) or 'none'}"
+        """The joint lists seen, and the joints no message names at all."""
         seen = f"joint lists seen: {', '.join(self.seen) or 'none'}"
-        unnamed = [j for j in self.spec.joints if j not in self._joints_seen]
+        unnamed = [j for j in self._joints if j not in self._joints_seen]
         return f"no message names {unnamed}; {seen}" if unnamed else seen
 
     def fix(self) -> str:
-        if isinstance(self.spec, TransformFilter):
-            return "set selector.child_frame (and parent_frame) to a frame the bag publishes."
         if self.seen and not self._joints_seen:
             return "the robot publishes no joint names: select by index, e.g. 'position[0]'."
         return (
@@ -91,12 +130,10 @@ class SampleTest:
             "entry with the same key: the entries' values are concatenated in declaration order."
         )
 
-    @property
-    def field(self) -> str:
-        """The contract field to fix: ``selector.child_frame`` or ``selector.names``."""
-        return "selector.child_frame" if isinstance(self.spec, TransformFilter) else "selector.names"
-
 
 def sample_tests(filters: dict[str, StreamFilter]) -> dict[str, SampleTest]:
     """A test per filtered stream (a stream name -> its test)."""
-    return {stream: SampleTest(spec) for stream, spec in filters.items()}
+    return {
+        stream: _TransformTest(spec) if isinstance(spec, TransformFilter) else _JointTest(spec)
+        for stream, spec in filters.items()
+    }

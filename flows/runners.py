@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import multiprocessing
 import os
 import threading
@@ -194,18 +195,38 @@ def ray_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
         raise RayMissingError(str(err)) from err
 
     runner: TaskRunner[Any]
+    log_kwargs: dict[str, Any] = {"logging_level": _ray_logging_level()}
     if config.ray_address == "auto":
         # prefect-ray would drop "auto" and start a local instance where none runs; Ray's "auto"
         # connects to the cluster this machine belongs to, or fails.
-        runner = RayTaskRunner(init_kwargs={"address": "auto"})
+        runner = RayTaskRunner(init_kwargs={"address": "auto", **log_kwargs})
     elif config.ray_address:
-        runner = RayTaskRunner(address=config.ray_address)
+        runner = RayTaskRunner(address=config.ray_address, init_kwargs=log_kwargs)
     else:
+        # Ray's default for a new local instance, said explicitly: token authentication (Ray warns on every
+        # start when the mode is left unset). A mode set in the environment is kept.
+        os.environ.setdefault("RAY_AUTH_MODE", "token")
         # "local": a fresh instance even where one runs already (ray.init would join that one).
         runner = RayTaskRunner(
-            init_kwargs={"address": "local", "num_cpus": workers, "num_gpus": 0, "include_dashboard": False}
+            init_kwargs={
+                "address": "local",
+                "num_cpus": workers,
+                "num_gpus": 0,
+                "include_dashboard": False,
+                **log_kwargs,
+            }
         )
     return runner
+
+
+def _ray_logging_level() -> int:
+    """Ray's driver log level from Prefect's, which ``--verbose``/``--quiet`` set (flows/cli.py): Ray's
+    INFO lines (its instance started, the cluster joined) with ``--verbose`` only, its errors alone with
+    ``--quiet``."""
+    prefect_level = os.environ.get("PREFECT_LOGGING_LEVEL", "WARNING").upper()
+    return {"DEBUG": logging.DEBUG, "INFO": logging.INFO, "ERROR": logging.ERROR}.get(
+        prefect_level, logging.WARNING
+    )
 
 
 def _start_forked_worker(

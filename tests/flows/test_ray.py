@@ -3,6 +3,7 @@ address only with its runner, and a clear error without the extra."""
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import shutil
@@ -73,6 +74,27 @@ def test_runner_ray_without_the_extra_says_how_to_install(monkeypatch: pytest.Mo
         ray_runner(_config(runner="ray"), workers=2)
 
 
+@pytest.mark.parametrize(
+    ("prefect_level", "ray_level"),
+    [("INFO", logging.INFO), ("WARNING", logging.WARNING), ("ERROR", logging.ERROR)],
+    ids=["verbose", "default", "quiet"],
+)
+@pytest.mark.parametrize("address", ["", "auto", "ray://head:10001"])
+def test_ray_logs_at_the_level_of_the_run(
+    monkeypatch: pytest.MonkeyPatch, prefect_level: str, ray_level: int, address: str
+) -> None:
+    """Ray's driver lines follow --verbose / --quiet (flows/cli.py sets Prefect's level from them): its
+    'Started a local Ray instance' and 'Connecting to existing Ray cluster' only with --verbose."""
+    monkeypatch.setenv("PREFECT_LOGGING_LEVEL", prefect_level)
+    monkeypatch.setenv("RAY_AUTH_MODE", "probe")
+    monkeypatch.delenv("RAY_AUTH_MODE")  # restored (unset) after the test, whatever ray_runner sets
+    fields = {"ray_address": address} if address else {}
+    runner = ray_runner(_config(runner="ray", **fields), workers=2)
+    assert runner.init_kwargs["logging_level"] == ray_level  # type: ignore[attr-defined]
+    # a local instance bagport starts says its auth mode (Ray's default), so Ray does not warn about it
+    assert os.environ.get("RAY_AUTH_MODE") == (None if address else "token")
+
+
 @pytest.mark.slow
 @pytest.mark.xdist_group("ray")  # one local Ray instance at a time under xdist
 def test_convert_on_a_local_ray_instance(tmp_path: Path) -> None:
@@ -95,7 +117,8 @@ def test_convert_on_a_local_ray_instance(tmp_path: Path) -> None:
     ) as proc:  # fmt: skip
         stdout, stderr = proc.communicate(timeout=300)
     assert proc.returncode == 0, stderr[-3000:]
-    assert "Started a local Ray instance" in stderr
+    assert "Started a local Ray instance" in stderr  # --verbose: Ray's INFO lines
+    assert "Token authentication is enabled for this Ray cluster" not in stderr  # its mode said explicitly
     ran = {name: int(pid) for pid, name in FINISHED.findall(stdout + stderr)}
     # Every episode ran as a Ray task in a Ray worker process, not in the CLI's.
     assert sorted(ran) == ["episode_000", "episode_001", "episode_002.bag"], stderr[-3000:]

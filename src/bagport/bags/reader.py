@@ -95,6 +95,7 @@ class RosbagsReader:
         be opened closes this reader and raises :class:`BagReadError` (its damage located)."""
         uri = self._uri
         store = Stores.ROS1_NOETIC if storage is Storage.ROS1 else Stores.ROS2_HUMBLE
+        mcap_files = plan.data_files if storage is Storage.MCAP else []
         try:
             ours = parse_msg_definitions(BUNDLED_DEFINITIONS, "bagport's bundled types")
             given = parse_msg_definitions(msg_definitions or {})
@@ -102,10 +103,6 @@ class RosbagsReader:
             bundled = get_typestore(store)
             # the type store is shared by bags with the same definitions, storage and extra types
             store_key = f"{store}:{json.dumps(sorted((msg_definitions or {}).items()))}"
-            mcap_files = plan.data_files if storage is Storage.MCAP else []
-            check_profiles(
-                uri, mcap_files, metadata_yaml=plan.metadata_yaml
-            )  # rosbags' refusal reads as damage
             self._reader: Any = TolerantAnyReader(plan.paths, default_typestore=bundled, store_key=store_key)
             self._reader.open()
             check_summaries(uri, mcap_files)
@@ -121,15 +118,20 @@ class RosbagsReader:
             self.close()
             raise
         except STORAGE_ERRORS as err:
-            error = damaged_bag(
-                err,
-                uri=uri,
-                storage=storage,
-                files=plan.data_files,
-                action="cannot be opened",
-                metadata_yaml=plan.metadata_yaml,
-            )
-            self.close()
+            try:
+                # rosbags refuses an MCAP file of another profile ("Profile is not ros2"), which reads as
+                # damage: say what the file is (read only when opening failed: a request per remote file)
+                check_profiles(uri, mcap_files, metadata_yaml=plan.metadata_yaml)
+                error = damaged_bag(
+                    err,
+                    uri=uri,
+                    storage=storage,
+                    files=plan.data_files,
+                    action="cannot be opened",
+                    metadata_yaml=plan.metadata_yaml,
+                )
+            finally:
+                self.close()
             raise error from err
         except BaseException:  # TransientError from a ranged read, KeyboardInterrupt
             self.close()

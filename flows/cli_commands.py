@@ -149,11 +149,11 @@ def cmd_contract_check(args: argparse.Namespace) -> int:
 
 def cmd_contract_init(args: argparse.Namespace) -> int:
     from bagport.bags import open_bag  # noqa: PLC0415
-    from bagport.contract.draft import draft_contract  # noqa: PLC0415
+    from bagport.contract.draft import draft_contract_from_bag  # noqa: PLC0415
     from bagport.errors import BagportError  # noqa: PLC0415
 
     with open_bag(args.bag, msg_definitions=msg_definitions(args)) as reader:
-        text = draft_contract(reader.info, robot_type=args.robot_type, fps=args.fps)
+        text = draft_contract_from_bag(reader, robot_type=args.robot_type, fps=args.fps)
     if args.out:
         out = Path(args.out)
         if out.exists():

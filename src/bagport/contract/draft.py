@@ -2,12 +2,18 @@
 
 from __future__ import annotations
 
+import json
 import re
+from collections.abc import Mapping, Sequence
 
+from bagport.bags import BagReader
 from bagport.bags.records import BagInfo, TopicInfo
 from bagport.msgtypes import IMAGE_TYPES, TF_TYPES, RosType
 
-__all__ = ["draft_contract"]
+__all__ = ["draft_contract", "draft_contract_from_bag", "joint_lists"]
+
+_JOINT_MESSAGES_READ = 400
+"""Messages read per JointState topic to find its publishers' joint lists (each publishes at every cycle)."""
 
 _ACTION_WORDS = re.compile(r"cmd|command|target|goal|action|leader|desired|setpoint|teleop", re.IGNORECASE)
 _TASK_WORDS = re.compile(r"task|prompt|instruction|language|goal_text", re.IGNORECASE)
@@ -34,8 +40,53 @@ def _entry(key: str, topic: TopicInfo, indent: str = "  ") -> list[str]:
     return [f"{indent}- key: {key}", f"{indent}  topic: {topic.name}", f"{indent}  type: {topic.msgtype}"]
 
 
-def draft_contract(info: BagInfo, *, robot_type: str = "my_robot", fps: int = 30) -> str:
-    """YAML text of a Rosetta-style contract guessed from topic types and names."""
+def joint_lists(reader: BagReader, limit: int = _JOINT_MESSAGES_READ) -> dict[str, list[tuple[str, ...]]]:
+    """The distinct joint name lists of each JointState topic, in the order they first appear (two when an
+    arm's and a gripper's driver share /joint_states), from its first ``limit`` messages."""
+    topics = [t.name for t in reader.info.topics if t.msgtype == RosType.JOINT_STATE and t.count]
+    found: dict[str, dict[tuple[str, ...], None]] = {topic: {} for topic in topics}
+    read = dict.fromkeys(topics, 0)
+    for message in reader.messages(tuple(topics)):
+        found[message.topic][tuple(message.msg().name)] = None
+        read[message.topic] += 1
+        if all(n >= limit for n in read.values()):
+            break
+    return {topic: list(lists) for topic, lists in found.items()}
+
+
+def draft_contract_from_bag(reader: BagReader, *, robot_type: str = "my_robot", fps: int = 30) -> str:
+    """:func:`draft_contract` of an open bag, its JointState entries naming the joints each publisher sends."""
+    return draft_contract(reader.info, robot_type=robot_type, fps=fps, joints=joint_lists(reader))
+
+
+def _joint_entries(key: str, topic: TopicInfo, lists: Sequence[tuple[str, ...]]) -> list[str]:
+    """A JointState entry per joint list (one per publisher on the topic), or one naming no joints."""
+    named = [names for names in lists if names]
+    if not named:
+        return [
+            *_entry(key, topic),
+            "    # selector: {names: [position.<joint>, ...]}  # pin the joints and their order",
+        ]
+    lines = []
+    if len(named) > 1:
+        lines.append(
+            f"  # {topic.name} carries {len(named)} joint lists (publishers sharing it): an entry each, same key"
+        )
+    for names in named:
+        selected = [f"position.{name}" for name in names]  # the joint's position, whatever dots its name has
+        lines += [*_entry(key, topic), f"    selector: {{names: {json.dumps(selected)}}}"]
+    return lines
+
+
+def draft_contract(
+    info: BagInfo,
+    *,
+    robot_type: str = "my_robot",
+    fps: int = 30,
+    joints: Mapping[str, Sequence[tuple[str, ...]]] | None = None,
+) -> str:
+    """YAML text of a Rosetta-style contract guessed from topic types and names; ``joints`` (see
+    :func:`joint_lists`) names the joints of JointState state entries."""
     observations: list[str] = []
     actions: list[str] = []
     tasks: list[str] = []
@@ -56,10 +107,7 @@ def draft_contract(info: BagInfo, *, robot_type: str = "my_robot", fps: int = 30
                 f"      type: {topic.msgtype}",
             ]
         elif topic.msgtype == RosType.JOINT_STATE:
-            observations += _entry("observation.state", topic)
-            observations.append(
-                "    # selector: {names: [position.<joint>, ...]}  # pin the joints and their order"
-            )
+            observations += _joint_entries("observation.state", topic, (joints or {}).get(topic.name, []))
         elif topic.msgtype == RosType.STRING and _TASK_WORDS.search(topic.name):
             tasks += _entry("task", topic)
         elif topic.msgtype in TF_TYPES:

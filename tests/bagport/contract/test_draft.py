@@ -8,7 +8,7 @@ import pytest
 
 from bagport.bags import open_bag
 from bagport.contract import FeatureKind, parse_contract
-from bagport.contract.draft import draft_contract
+from bagport.contract.draft import draft_contract, draft_contract_from_bag
 from bagport.feature_table import describe_features
 from bagport.synth import CameraSpec, EpisodeSpec, write_episode_bag
 from flows.cli import main
@@ -91,3 +91,19 @@ def test_draft_maps_video_streams_and_rvl_depth_to_cameras(tmp_path: Path) -> No
     shapes = {row.key: row.shape for row in describe_features(plan, str(tmp_path / "ep"))}
     assert shapes["observation.images.front"] is None and shapes["observation.images.wrist"] is None
     assert shapes["observation.images.depth"] == (96, 128, 1)
+
+
+def test_draft_names_each_publishers_joints_on_a_shared_topic(tmp_path: Path) -> None:
+    """An arm's and a gripper's driver on /joint_states: the draft has an entry per joint list, with the
+    same key, and it checks against the bag (an entry naming joints reads the messages naming them)."""
+    from tests.bagport.episode.test_samples import write_shared_joint_states  # noqa: PLC0415
+
+    bag = write_shared_joint_states(tmp_path / "shared", "mcap")
+    with open_bag(str(bag)) as reader:
+        text = draft_contract_from_bag(reader)
+    assert "  # /joint_states carries 2 joint lists (publishers sharing it): an entry each, same key" in text
+    assert 'selector: {names: ["position.j1", "position.j2"]}' in text
+    assert 'selector: {names: ["position.g"]}' in text
+    plan = parse_contract(text, "draft.yaml")
+    rows = {row.key: row for row in describe_features(plan, str(bag))}
+    assert rows["observation.state"].names == ("position.j1", "position.j2", "position.g")

@@ -43,7 +43,7 @@ def _joint_state(store: Typestore, t_ns: int, names: list[str], positions: list[
     )
 
 
-def _bag(path: Path, storage: Literal["mcap", "sqlite3", "ros1"]) -> Path:
+def write_shared_joint_states(path: Path, storage: Literal["mcap", "sqlite3", "ros1"]) -> Path:
     """The arm (j1, j2: k, -k) at the ticks, the gripper (g: 100 + k) 30 ms after each, on one topic."""
     store = TS1 if storage == "ros1" else TS
     messages = []
@@ -78,7 +78,7 @@ def test_each_entry_reads_the_messages_naming_its_joints(
 ) -> None:
     from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
 
-    bag = _bag(tmp_path / "shared", storage)
+    bag = write_shared_joint_states(tmp_path / "shared", storage)
     stamp = "publish" if storage == "mcap" else "header"
     rows = {row.key: row for row in describe_features(parse_contract(_contract(stamp), "c.yaml"), str(bag))}
     assert rows["observation.state"].names == ("position.j1", "j2", "g")
@@ -95,7 +95,7 @@ def test_each_entry_reads_the_messages_naming_its_joints(
 
 
 def test_the_streams_are_named_by_their_joints_only_when_entries_differ(tmp_path: Path) -> None:
-    bag = _bag(tmp_path / "shared", "mcap")
+    bag = write_shared_joint_states(tmp_path / "shared", "mcap")
     plan = parse_contract(_contract(), "c.yaml")
     assert plan.streams() == ("/joint_states#j1,j2", "/joint_states#g", "/joint_states#j2")
     with open_bag(str(bag)) as reader:
@@ -117,7 +117,7 @@ def test_the_streams_are_named_by_their_joints_only_when_entries_differ(tmp_path
 def test_an_entry_whose_joints_no_message_names_together_says_to_split_it(
     tmp_path: Path, storage: Literal["mcap", "ros1"]
 ) -> None:
-    bag = _bag(tmp_path / "shared", storage)
+    bag = write_shared_joint_states(tmp_path / "shared", storage)
     text = f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "[j1, g]")
     plan = parse_contract(text, "c.yaml")
     with pytest.raises(ContractError) as caught:

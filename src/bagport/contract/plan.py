@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
@@ -15,6 +16,7 @@ from bagport.contract.model import (
     StampSource,
     TaskEntry,
 )
+from bagport.decode.custom import registered_decoder
 from bagport.decode.joints import selected_joints
 from bagport.errors import ContractError
 from bagport.msgtypes import IMAGE_TYPES, TF_TYPES, RosType
@@ -100,12 +102,12 @@ class SourceSpec:
 
     @property
     def stream(self) -> str:
-        """What the timeline tracks: the topic, ``topic#child_frame`` for a TF lookup, or ``topic#j1,j2`` for
-        joints that other entries on the topic do not select."""
+        """What the timeline tracks: the topic, ``topic#child_frame`` for a TF lookup, or ``topic#j1,j2`` (the
+        joints sorted) for joints that other entries on the topic do not select."""
         if self.child_frame is not None:
             return f"{self.topic}#{self.child_frame}"
         if self.joints_in_stream:
-            return f"{self.topic}#{','.join(self.joints)}"
+            return f"{self.topic}#{','.join(json.dumps(j) if ',' in j else j for j in sorted(self.joints))}"
         return self.topic
 
     @property
@@ -189,7 +191,11 @@ def _source(
     image = entry.image if isinstance(entry, ObservationEntry) else None
     resize = image.resize if image else None
     names = entry.selector.names if entry.selector else ()
-    by_joint_name = msgtype == RosType.JOINT_STATE and entry.decoder is None
+    # the built-in JointState extractor reads joints by name; a decoder (the entry's, or one registered for
+    # the type) makes its own values, which selector.names only label
+    by_joint_name = (
+        msgtype == RosType.JOINT_STATE and entry.decoder is None and registered_decoder(msgtype) is None
+    )
     return SourceSpec(
         key=entry.key,
         section=section,
@@ -213,10 +219,10 @@ def _source(
 
 def _name_joint_streams(sources: list[SourceSpec]) -> list[SourceSpec]:
     """Entries selecting different joints of one topic read different streams (their own messages)."""
-    selections: dict[str, set[tuple[str, ...]]] = {}
+    selections: dict[str, set[frozenset[str]]] = {}
     for src in sources:
         if src.child_frame is None:
-            selections.setdefault(src.topic, set()).add(src.joints)
+            selections.setdefault(src.topic, set()).add(frozenset(src.joints))
     return [
         replace(src, joints_in_stream=True) if src.joints and len(selections[src.topic]) > 1 else src
         for src in sources

@@ -14,6 +14,7 @@ from rosbags.typesys.store import Typestore
 
 from bagport.bags import open_bag
 from bagport.contract import parse_contract
+from bagport.episode.checks import check_window_has_data
 from bagport.episode.timeline import scan_plan_timeline
 from bagport.errors import AlignmentError, ContractError
 from bagport.feature_table import describe_features
@@ -132,3 +133,52 @@ def test_an_entry_whose_joints_no_message_names_together_says_to_split_it(
         pytest.raises(AlignmentError, match=r"joint lists seen: \['j1', 'j2'\]"),
     ):
         scan_plan_timeline(reader, plan)
+
+
+def mean_and_max(msg: Any, _spec: Any) -> list[float]:
+    """A decoder registered for JointState: its values are its own, selector.names only label them."""
+    return [float(np.mean(msg.position)), float(np.max(msg.position))]
+
+
+def test_a_decoder_registered_for_joint_state_reads_every_message(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from bagport.decode import custom, register_decoder  # noqa: PLC0415
+
+    monkeypatch.setattr(custom, "_REGISTRY", dict(custom._REGISTRY))
+    register_decoder(JOINT_STATE)(mean_and_max)
+    bag = write_shared_joint_states(tmp_path / "shared", "mcap")
+    plan = parse_contract(
+        f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.summary", "[mean, max]"), "c.yaml"
+    )
+    assert plan.stream_filters() == {}  # the names are labels, not joints a message must name
+    rows = describe_features(plan, str(bag))
+    assert rows[0].names == ("mean", "max")
+
+
+def test_a_window_without_the_topic_says_so_not_that_the_joints_are_wrong(tmp_path: Path) -> None:
+    """An episode window where the shared topic has no message at all: the window's check names it (a
+    filtered stream with no sample in it is only the joints' fault when the topic had other messages)."""
+    bag = write_shared_joint_states(tmp_path / "shared", "mcap")
+    plan = parse_contract(
+        f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "[j1]"), "c"
+    )
+    window = (START_NS + FRAMES * PERIOD_NS, START_NS + (FRAMES + 5) * PERIOD_NS)  # after the last message
+    with open_bag(str(bag)) as reader:
+        timeline = scan_plan_timeline(reader, plan, window)
+        with pytest.raises(
+            AlignmentError, match=r"topic /joint_states has no messages in the episode window"
+        ):
+            check_window_has_data(timeline, window, reader.info.start_ns, str(bag))
+
+
+def test_entries_selecting_the_same_joints_in_another_order_share_a_stream() -> None:
+    text = (
+        f"robot_type: r\nfps: {FPS}\nobservations:\n"
+        + _entry("observation.a", "[j1, j2]")
+        + _entry("observation.b", "[velocity.j2, j1]")
+        + _entry("observation.c", "[g]")
+        + _entry("observation.d", "['a,b']")
+    )
+    plan = parse_contract(text, "c.yaml")
+    assert plan.streams() == ("/joint_states#j1,j2", "/joint_states#g", '/joint_states#"a,b"')

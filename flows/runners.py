@@ -220,13 +220,11 @@ def ray_runner(config: ConvertConfig, workers: int) -> TaskRunner[Any]:
 
 
 def _ray_logging_level() -> int:
-    """Ray's driver log level from Prefect's, which ``--verbose``/``--quiet`` set (flows/cli.py): Ray's
-    INFO lines (its instance started, the cluster joined) with ``--verbose`` only, its errors alone with
-    ``--quiet``."""
-    prefect_level = os.environ.get("PREFECT_LOGGING_LEVEL", "WARNING").upper()
-    return {"DEBUG": logging.DEBUG, "INFO": logging.INFO, "ERROR": logging.ERROR}.get(
-        prefect_level, logging.WARNING
-    )
+    """Ray's driver log level: Prefect's, which ``bagport convert`` sets from ``--verbose``/``--quiet``
+    (flows/cli.py: Ray's INFO lines, its instance started or the cluster joined, with ``--verbose`` only, its
+    errors alone with ``--quiet``) and a deployment's worker leaves at Prefect's default (INFO)."""
+    level = logging.getLevelName(str(get_current_settings().logging.level).upper())
+    return level if isinstance(level, int) else logging.WARNING
 
 
 def _start_forked_worker(

@@ -244,7 +244,8 @@ def test_a_deployment_runs_on_ray(tmp_path: Path) -> None:
         "    reconvert(config=json.loads(sys.argv[1]))\n"
     )
     ray_tmp = tempfile.mkdtemp(prefix="bagport-ray-")  # short: Unix socket paths are limited
-    env = {**os.environ, "RAY_TMPDIR": ray_tmp, "BAGPORT_DEBUG": "0"}
+    # Prefect's default level, as a worker runs it (the tests' is WARNING): Ray's INFO lines follow it
+    env = {**os.environ, "RAY_TMPDIR": ray_tmp, "BAGPORT_DEBUG": "0", "PREFECT_LOGGING_LEVEL": "INFO"}
     try:
         done = subprocess.run(
             [sys.executable, "-c", script, json.dumps(config)],

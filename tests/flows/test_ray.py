@@ -15,6 +15,7 @@ from pathlib import Path
 import psutil
 import pydantic
 import pytest
+from prefect.settings import PREFECT_LOGGING_LEVEL, temporary_settings
 
 from bagport.config import ConvertConfig
 from bagport.dataset.validate import validate_dataset
@@ -83,13 +84,14 @@ def test_runner_ray_without_the_extra_says_how_to_install(monkeypatch: pytest.Mo
 def test_ray_logs_at_the_level_of_the_run(
     monkeypatch: pytest.MonkeyPatch, prefect_level: str, ray_level: int, address: str
 ) -> None:
-    """Ray's driver lines follow --verbose / --quiet (flows/cli.py sets Prefect's level from them): its
-    'Started a local Ray instance' and 'Connecting to existing Ray cluster' only with --verbose."""
-    monkeypatch.setenv("PREFECT_LOGGING_LEVEL", prefect_level)
+    """Ray's driver lines follow Prefect's level, which --verbose / --quiet set (flows/cli.py) and a
+    deployment's worker leaves at INFO: its 'Started a local Ray instance' and 'Connecting to existing Ray
+    cluster' with --verbose (and in a deployment's run, tests/flows/test_deployments.py), not by default."""
     monkeypatch.setenv("RAY_AUTH_MODE", "probe")
     monkeypatch.delenv("RAY_AUTH_MODE")  # restored (unset) after the test, whatever ray_runner sets
     fields = {"ray_address": address} if address else {}
-    runner = ray_runner(_config(runner="ray", **fields), workers=2)
+    with temporary_settings(updates={PREFECT_LOGGING_LEVEL: prefect_level}):
+        runner = ray_runner(_config(runner="ray", **fields), workers=2)
     assert runner.init_kwargs["logging_level"] == ray_level  # type: ignore[attr-defined]
     # a local instance bagport starts says its auth mode (Ray's default), so Ray does not warn about it
     assert os.environ.get("RAY_AUTH_MODE") == (None if address else "token")

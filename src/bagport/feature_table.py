@@ -19,7 +19,7 @@ from bagport.decode import (
 )
 from bagport.decode.video import video_packet
 from bagport.episode.checks import check_bag_fits
-from bagport.episode.samples import sample_tests
+from bagport.episode.samples import JointListGuard, sample_tests
 from bagport.errors import ContractError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
 from bagport.segment import check_episode_topics
@@ -53,6 +53,7 @@ def describe_features(
             check_bag_fits(reader.info, plan)
             check_episode_topics(reader, plan)
             first = _first_messages(reader, plan)
+            _check_one_joint_list(reader, plan)
     rows = []
     for feature in plan.features:
         sources = tuple(
@@ -95,6 +96,35 @@ def describe_features(
             FeatureRow(feature.key, feature.dtype, shape_v, tuple(names) if resolved else None, sources)
         )
     return rows
+
+
+_JOINT_LIST_MESSAGES = 400
+"""Messages of a JointState topic read by index that ``contract check`` compares (each publisher sends at
+every cycle of its driver, so a second one shows within the first few)."""
+
+
+def _check_one_joint_list(reader: BagReader, plan: ContractPlan) -> None:
+    """A JointState topic an entry reads by index alone must name one joint list in all its messages."""
+    entries = plan.one_joint_list_topics()
+    if not entries:
+        return
+    guards = {topic: JointListGuard(topic) for topic in entries}
+    read = dict.fromkeys(entries, 0)
+    for message in reader.messages(tuple(entries)):
+        lists = guards[message.topic].other_list(message)
+        if lists is not None:
+            src = entries[message.topic]
+            raise ContractError(
+                guards[message.topic].problem(lists, f"{src.section}[key={src.key}]")
+                + f" (in {reader.info.uri})",
+                file=plan.source_name,
+                line=src.line,
+                field=f"{src.section}[key={src.key}].selector.names",
+                fix=JointListGuard.fix,
+            )
+        read[message.topic] += 1
+        if all(n >= _JOINT_LIST_MESSAGES for n in read.values()):
+            return
 
 
 def _first_messages(reader: BagReader, plan: ContractPlan) -> dict[str, object]:

@@ -94,6 +94,9 @@ class SourceSpec:
     """A JointState read by joint name: the joints a message must name to be a sample (:class:`JointFilter`)."""
     joints_in_stream: bool = False
     """The stream's name says its joints: entries on the topic select different joints."""
+    one_joint_list: bool = False
+    """A JointState read by index alone (``position[0]``): every message of the topic must name the same joints
+    in the same order, or two publishers' arrays would mix (:class:`bagport.episode.samples.JointListGuard`)."""
 
     @property
     def msg_type(self) -> str:
@@ -175,6 +178,10 @@ class ContractPlan:
     def stream_filters(self) -> dict[str, StreamFilter]:
         return {src.stream: f for src in self.sources if (f := src.stream_filter) is not None}
 
+    def one_joint_list_topics(self) -> dict[str, SourceSpec]:
+        """JointState topics an entry reads by index alone (:attr:`SourceSpec.one_joint_list`): the entry."""
+        return {src.topic: src for src in self.sources if src.one_joint_list}
+
 
 def _source(
     entry: ObservationEntry | ActionEntry | ScalarEntry,
@@ -214,6 +221,7 @@ def _source(
         child_frame=entry.selector.child_frame if entry.selector else None,
         parent_frame=entry.selector.parent_frame if entry.selector else None,
         joints=selected_joints(names) if by_joint_name else (),
+        one_joint_list=by_joint_name and bool(names) and not selected_joints(names),
     )
 
 

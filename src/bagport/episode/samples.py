@@ -13,7 +13,7 @@ from bagport.contract.plan import JointFilter, StreamFilter, TransformFilter
 from bagport.decode import child_frames, find_transform, transform_stamp_ns
 from bagport.decode.joint_state_cdr import JointStateCdr
 
-__all__ = ["SampleTest", "sample_tests"]
+__all__ = ["JointListGuard", "SampleTest", "sample_tests"]
 
 _SEEN_KEPT = 30
 """What other samples a topic had (frames, joint lists), kept for the error when none is the stream's."""
@@ -137,3 +137,38 @@ def sample_tests(filters: dict[str, StreamFilter]) -> dict[str, SampleTest]:
         stream: _TransformTest(spec) if isinstance(spec, TransformFilter) else _JointTest(spec)
         for stream, spec in filters.items()
     }
+
+
+class JointListGuard:
+    """A JointState topic an entry reads by index alone (``position[0]``): its messages must all name the same
+    joints in the same order, or the entry would mix two publishers' arrays without a sign."""
+
+    def __init__(self, topic: str) -> None:
+        self.topic = topic
+        self._reader = JointStateCdr()
+        self._first: tuple[str, ...] | None = None
+
+    def other_list(self, message: BagMessage) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
+        """``(the first message's names, this one's)`` when they differ, else ``None``."""
+        raw = message.cdr
+        names = None if raw is None else self._reader.names(raw)
+        if names is None:
+            names = tuple(message.msg().name)
+        if self._first is None:
+            self._first = names
+        elif names is not self._first and names != self._first:
+            return self._first, names
+        return None
+
+    def problem(self, lists: tuple[tuple[str, ...], tuple[str, ...]], entry: str) -> str:
+        first, other = lists
+        return (
+            f"{self.topic} carries messages naming different joints ({list(first)}, then {list(other)}): "
+            f"publishers with different joints share it, and the entry ({entry}) selects by index, which would mix their "
+            "arrays"
+        )
+
+    fix = (
+        "select the joints by name in selector.names (an entry then reads only the messages naming them); give "
+        "each publisher's joints an entry of their own with the same key."
+    )

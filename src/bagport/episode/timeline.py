@@ -18,7 +18,7 @@ from bagport.bags import BagMessage, BagReader
 from bagport.contract import ContractPlan, FeatureKind
 from bagport.contract.plan import StreamFilter
 from bagport.decode.video import KeyframeGate, video_packet
-from bagport.episode.samples import SampleTest, sample_tests
+from bagport.episode.samples import JointListGuard, SampleTest, sample_tests
 from bagport.episode.video import keyframe_before
 from bagport.errors import AlignmentError, BagReadError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
@@ -206,12 +206,15 @@ def scan_timeline(
     window_ns: WindowNs | None = None,
     video_topics: Iterable[str] = (),
     entries: Mapping[str, str] | None = None,
+    one_joint_lists: Mapping[str, str] | None = None,
 ) -> Timeline:
     """Stamps of every stream; ``topics`` are stream names (see ``SourceSpec.stream``): a topic, or a
     name in ``filters`` whose samples are only some messages of its topic (:mod:`bagport.episode.samples`).
     MCAP publish times too for the streams in ``publish_topics`` (``stamp: publish``).
     The samples of ``video_topics`` are their packets from a key frame on (:mod:`bagport.episode.video`).
-    ``entries`` names the contract entry of a filtered stream in its error when no message is its sample.
+    ``entries`` names the contract entry of a filtered stream in its error when no message is its sample;
+    ``one_joint_lists`` (a topic -> its entry) are JointState topics read by index, whose messages must all
+    name the same joints (:class:`JointListGuard`).
     With ``window_ns`` (log time, inclusive) only the messages inside it, plus the task prompts
     before it (a prompt holds until the next). The reader checks the counts against the bag's index."""
     feature_topics = tuple(topics)
@@ -233,9 +236,16 @@ def scan_timeline(
         tasks += [_task_message(m) for m in reader.messages(tuple(sorted(task_set)), stop_ns=start_ns)]
     gates, prerolls = _video_gates(reader, dict.fromkeys(video_topics), window_ns)
     wanted = tuple(dict.fromkeys((*by_topic, *task_set)))
+    guards = {topic: JointListGuard(topic) for topic in one_joint_lists or {}}
     for message in reader.messages(wanted, start_ns=start_ns, stop_ns=stop_ns):
         if message.topic in task_set:
             tasks.append(_task_message(message))
+        guard = guards.get(message.topic)
+        if guard is not None and (lists := guard.other_list(message)) is not None:
+            entry = (one_joint_lists or {})[message.topic]
+            raise AlignmentError(
+                guard.problem(lists, entry), uri=reader.info.uri, topic=message.topic, fix=guard.fix
+            )
         gate = gates.get(message.topic)
         if gate is not None and not _admitted(message, gate, reader.info.uri):
             continue
@@ -286,4 +296,5 @@ def scan_plan_timeline(reader: BagReader, plan: ContractPlan, window_ns: WindowN
             if s.msgtype in VIDEO_TYPES
         ],
         {s.stream: s.entry_text(plan.source_name) for s in reversed(plan.sources) if s.stream_filter},
+        {topic: src.entry_text(plan.source_name) for topic, src in plan.one_joint_list_topics().items()},
     )

@@ -182,3 +182,28 @@ def test_entries_selecting_the_same_joints_in_another_order_share_a_stream() -> 
     )
     plan = parse_contract(text, "c.yaml")
     assert plan.streams() == ("/joint_states#j1,j2", "/joint_states#g", '/joint_states#"a,b"')
+
+
+@pytest.mark.parametrize("storage", ["mcap", "ros1"])
+def test_an_entry_selecting_by_index_on_a_shared_topic_is_refused_not_mixed(
+    tmp_path: Path, storage: Literal["mcap", "ros1"]
+) -> None:
+    """`position[0]` reads every message: on a topic two publishers share it would take the arm's j1 and the
+    gripper's g in turn, without a sign. contract check and convert refuse it and say to select by name."""
+    bag = write_shared_joint_states(tmp_path / "shared", storage)
+    text = f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "['position[0]']")
+    plan = parse_contract(text, "c.yaml")
+    assert list(plan.one_joint_list_topics()) == ["/joint_states"]
+    with pytest.raises(ContractError) as caught:
+        describe_features(plan, str(bag))
+    said = str(caught.value)
+    assert "/joint_states carries messages naming different joints (['j1', 'j2'], then ['g'])" in said
+    assert caught.value.field == "observations[key=observation.state].selector.names"
+    assert "select the joints by name in selector.names" in said
+    with (
+        open_bag(str(bag)) as reader,
+        pytest.raises(AlignmentError, match=r"observations\[key=observation\.state\]\) selects by index"),
+    ):
+        scan_plan_timeline(reader, plan)
+    named = parse_contract(text.replace("['position[0]']", "['position[0]', j1]"), "c.yaml")
+    assert named.one_joint_list_topics() == {}  # a joint named: the entry reads the messages naming it

@@ -13,7 +13,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
 from bagport.bags import open_bag
-from bagport.contract import parse_contract
+from bagport.contract import ContractPlan, parse_contract
 from bagport.episode.checks import check_window_has_data
 from bagport.episode.timeline import scan_plan_timeline
 from bagport.errors import AlignmentError, ContractError
@@ -120,19 +120,22 @@ def test_an_entry_whose_joints_no_message_names_together_says_to_split_it(
 ) -> None:
     bag = write_shared_joint_states(tmp_path / "shared", storage)
     text = f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "[j1, g]")
-    plan = parse_contract(text, "c.yaml")
-    with pytest.raises(ContractError) as caught:
-        describe_features(plan, str(bag))
-    said = str(caught.value)
+    checked, converted = _refused(parse_contract(text, "c.yaml"), bag)
+    said = str(checked)
     assert "no message on /joint_states" in said
     assert "carries all of the joints ['j1', 'g'] (joint lists seen: ['j1', 'j2'], ['g'])" in said
-    assert caught.value.field == "observations[key=observation.state].selector.names"
+    assert checked.field == "observations[key=observation.state].selector.names"
     assert "give each publisher's joints their own entry with the same key" in said
-    with (
-        open_bag(str(bag)) as reader,
-        pytest.raises(AlignmentError, match=r"joint lists seen: \['j1', 'j2'\]"),
-    ):
+    assert "joint lists seen: ['j1', 'j2']" in str(converted)
+
+
+def _refused(plan: ContractPlan, bag: Path) -> tuple[ContractError, AlignmentError]:
+    """What contract check and convert's pass 1 say of ``plan`` on ``bag``: both refuse it."""
+    with pytest.raises(ContractError) as checked:
+        describe_features(plan, str(bag))
+    with open_bag(str(bag)) as reader, pytest.raises(AlignmentError) as converted:
         scan_plan_timeline(reader, plan)
+    return checked.value, converted.value
 
 
 def mean_and_max(msg: Any, _spec: Any) -> list[float]:
@@ -194,16 +197,11 @@ def test_an_entry_selecting_by_index_on_a_shared_topic_is_refused_not_mixed(
     text = f"robot_type: r\nfps: {FPS}\nobservations:\n" + _entry("observation.state", "['position[0]']")
     plan = parse_contract(text, "c.yaml")
     assert list(plan.one_joint_list_topics()) == ["/joint_states"]
-    with pytest.raises(ContractError) as caught:
-        describe_features(plan, str(bag))
-    said = str(caught.value)
+    checked, converted = _refused(plan, bag)
+    said = str(checked)
     assert "/joint_states carries messages naming different joints (['j1', 'j2'], then ['g'])" in said
-    assert caught.value.field == "observations[key=observation.state].selector.names"
+    assert checked.field == "observations[key=observation.state].selector.names"
     assert "select the joints by name in selector.names" in said
-    with (
-        open_bag(str(bag)) as reader,
-        pytest.raises(AlignmentError, match=r"observations\[key=observation\.state\]\) selects by index"),
-    ):
-        scan_plan_timeline(reader, plan)
+    assert "observations[key=observation.state]) selects by index" in str(converted)
     named = parse_contract(text.replace("['position[0]']", "['position[0]', j1]"), "c.yaml")
     assert named.one_joint_list_topics() == {}  # a joint named: the entry reads the messages naming it

@@ -197,6 +197,54 @@ def _topic_timeline(
     )
 
 
+class _Streams:
+    """Pass 1's record of every stream: log and header stamps of its samples, how many messages of its topic a
+    filtered stream passed over, and a filtered stream's samples' positions in its topic (for publish times)."""
+
+    def __init__(
+        self, streams: tuple[str, ...], tests: Mapping[str, SampleTest], publish: Iterable[str]
+    ) -> None:
+        self.tests = tests
+        self.log: dict[str, list[int]] = {s: [] for s in streams}
+        self.header: dict[str, list[int | None]] = {s: [] for s in streams}
+        self.topic_of = {s: tests[s].spec.topic if s in tests else s for s in streams}
+        self.by_topic: dict[str, list[str]] = {}
+        for stream in streams:
+            self.by_topic.setdefault(self.topic_of[stream], []).append(stream)
+        self.publish = {stream: self.topic_of[stream] for stream in dict.fromkeys(publish)}
+        self.positions: dict[str, list[int]] = {s: [] for s in self.publish if s in tests}
+        self.passed_over = dict.fromkeys(tests, 0)
+        self._counted = dict.fromkeys((self.topic_of[s] for s in self.positions), 0)
+
+    def take(self, message: BagMessage) -> None:
+        for stream in self.by_topic.get(message.topic, ()):
+            test = self.tests.get(stream)
+            if test is None:
+                stamp_ns = message.header_stamp_ns()
+            elif test.carries(message):
+                stamp_ns = test.stamp_ns(message)
+                if stream in self.positions:
+                    self.positions[stream].append(self._counted[message.topic])
+            else:
+                self.passed_over[stream] += 1
+                continue
+            self.log[stream].append(message.log_time_ns)
+            self.header[stream].append(stamp_ns)
+        if message.topic in self._counted:
+            self._counted[message.topic] += 1
+
+
+def _check_joint_list(
+    guards: Mapping[str, JointListGuard], entries: Mapping[str, str], message: BagMessage, uri: str
+) -> None:
+    """Refuse a JointState topic read by index whose messages name different joints."""
+    guard = guards.get(message.topic)
+    if guard is not None and (lists := guard.other_list(message)) is not None:
+        raise AlignmentError(
+            guard.problem(lists, entries[message.topic]), uri=uri, topic=message.topic, fix=guard.fix
+        )
+
+
 def scan_timeline(
     reader: BagReader,
     topics: Iterable[str],
@@ -218,62 +266,41 @@ def scan_timeline(
     With ``window_ns`` (log time, inclusive) only the messages inside it, plus the task prompts
     before it (a prompt holds until the next). The reader checks the counts against the bag's index."""
     feature_topics = tuple(topics)
-    tests = sample_tests(dict(filters or {}))
+    streams = _Streams(feature_topics, sample_tests(dict(filters or {})), publish_topics)
     task_set = frozenset(task_topics)
-    log: dict[str, list[int]] = {t: [] for t in feature_topics}
-    header: dict[str, list[int | None]] = {t: [] for t in feature_topics}
-    topic_of = {stream: tests[stream].spec.topic if stream in tests else stream for stream in feature_topics}
-    by_topic: dict[str, list[str]] = {}
-    for stream in feature_topics:
-        by_topic.setdefault(topic_of[stream], []).append(stream)
-    publish = {stream: topic_of[stream] for stream in dict.fromkeys(publish_topics)}
-    positions: dict[str, list[int]] = {stream: [] for stream in publish if stream in tests}
-    passed_over = dict.fromkeys(tests, 0)
-    counted: dict[str, int] = dict.fromkeys((topic_of[stream] for stream in positions), 0)
     tasks: list[TaskMessage] = []
     start_ns, stop_ns = (None, None) if window_ns is None else (window_ns[0], window_ns[1] + 1)
     if start_ns is not None and task_set:
         tasks += [_task_message(m) for m in reader.messages(tuple(sorted(task_set)), stop_ns=start_ns)]
     gates, prerolls = _video_gates(reader, dict.fromkeys(video_topics), window_ns)
-    wanted = tuple(dict.fromkeys((*by_topic, *task_set)))
-    guards = {topic: JointListGuard(topic) for topic in one_joint_lists or {}}
+    wanted = tuple(dict.fromkeys((*streams.by_topic, *task_set)))
+    one_joint_lists = one_joint_lists or {}
+    guards = {topic: JointListGuard(topic) for topic in one_joint_lists}
     for message in reader.messages(wanted, start_ns=start_ns, stop_ns=stop_ns):
         if message.topic in task_set:
             tasks.append(_task_message(message))
-        guard = guards.get(message.topic)
-        if guard is not None and (lists := guard.other_list(message)) is not None:
-            entry = (one_joint_lists or {})[message.topic]
-            raise AlignmentError(
-                guard.problem(lists, entry), uri=reader.info.uri, topic=message.topic, fix=guard.fix
-            )
+        _check_joint_list(guards, one_joint_lists, message, reader.info.uri)
         gate = gates.get(message.topic)
-        if gate is not None and not _admitted(message, gate, reader.info.uri):
-            continue
-        for stream in by_topic.get(message.topic, ()):
-            test = tests.get(stream)
-            if test is None:
-                stamp_ns = message.header_stamp_ns()
-            elif test.carries(message):
-                stamp_ns = test.stamp_ns(message)
-                if stream in positions:
-                    positions[stream].append(counted[message.topic])
-            else:
-                passed_over[stream] += 1
-                continue
-            log[stream].append(message.log_time_ns)
-            header[stream].append(stamp_ns)
-        if message.topic in counted:
-            counted[message.topic] += 1
-    _check_samples_found(reader.info.uri, gates, tests, log, window_ns, entries or {}, passed_over)
+        if gate is None or _admitted(message, gate, reader.info.uri):
+            streams.take(message)
+    log = streams.log
+    _check_samples_found(
+        reader.info.uri, gates, streams.tests, log, window_ns, entries or {}, streams.passed_over
+    )
     skipped = {topic: gate.skipped for topic, gate in gates.items()}
-    publish_ns = _publish_times(reader, log, publish, positions, (start_ns, stop_ns), skipped)
+    publish_ns = _publish_times(reader, log, streams.publish, streams.positions, (start_ns, stop_ns), skipped)
     result = {
         topic: _topic_timeline(
-            topic, log[topic], header[topic], publish_ns.get(topic), gates.get(topic), prerolls.get(topic)
+            topic,
+            log[topic],
+            streams.header[topic],
+            publish_ns.get(topic),
+            gates.get(topic),
+            prerolls.get(topic),
         )
         for topic in feature_topics
     }
-    for stream, count in passed_over.items():
+    for stream, count in streams.passed_over.items():
         if stream in result:
             result[stream] = replace(result[stream], passed_over=count)
     return Timeline(topics=result, tasks=tuple(tasks))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from collections.abc import Collection
 from dataclasses import dataclass
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
@@ -106,7 +107,35 @@ def _window(chosen: list[_Chosen], uri: str) -> tuple[int, int]:
             uri=uri,
             fix="check the topics, the stamp source (header vs receive) and action_offset_ms in the contract.",
         )
+    if end_ns - start_ns > MAX_EPISODE_NS:
+        raise _clock_step_error(chosen, start_ns, end_ns, uri)
     return start_ns, end_ns
+
+
+MAX_EPISODE_NS = 24 * 3600 * NS_PER_S
+"""An episode longer than a day is a clock that stepped while recording, not a demonstration: refused before
+its frame grid (17 billion ticks for a bag whose first messages were logged at time 0) is allocated."""
+
+
+def _utc(t_ns: int) -> str:
+    return datetime.fromtimestamp(t_ns / NS_PER_S, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
+
+
+def _clock_step_error(chosen: list[_Chosen], start_ns: int, end_ns: int, uri: str) -> AlignmentError:
+    """Where no stream has a message for the longest stretch: the clock's step, for the error."""
+    stamps = np.unique(np.concatenate([t.stamps(s) - src.offset_ns for src, t, s in chosen]))
+    stamps = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
+    gaps = np.diff(stamps)
+    at = int(np.argmax(gaps)) if gaps.size else 0
+    before, after = (int(stamps[at]), int(stamps[at + 1])) if gaps.size else (start_ns, end_ns)
+    return AlignmentError(
+        f"the episode would last {(end_ns - start_ns) / NS_PER_S:,.0f} s ({_utc(start_ns)} to {_utc(end_ns)}), more "
+        f"than a day: no stream has a message from {_utc(before)} to {_utc(after)}, so the clock stepped while "
+        "recording (messages logged at time 0 by a node on sim time before /clock, or the system clock set)",
+        uri=uri,
+        fix="convert the part after the step with a manifest window (start_ns/end_ns), or align on header stamps "
+        "('align: {stamp: header}') when they are right.",
+    )
 
 
 def _clock_ticks(

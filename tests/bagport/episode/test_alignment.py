@@ -190,3 +190,25 @@ def test_fill_zeros_needs_a_size_and_gives_black_frames(
             assert rgb.max() < 20
         else:
             assert rgb.max() > 200
+
+
+def test_an_episode_over_a_day_is_a_clock_step_refused_before_its_grid() -> None:
+    """A node on sim time before /clock logs its first messages at time 0: the streams span 1970 to now, a grid
+    of 17 billion ticks (a MemoryError) unless refused first, saying where the clock stepped."""
+    from bagport.contract import parse_contract  # noqa: PLC0415
+    from bagport.episode.alignment import align_sources  # noqa: PLC0415
+    from bagport.episode.timeline import Timeline, TopicTimeline  # noqa: PLC0415
+
+    now_ns = 1_700_000_000_000_000_000
+    log_ns = np.array([0, 100_000_000, *(now_ns + k * 100_000_000 for k in range(20))], dtype=np.int64)
+    plan = parse_contract(
+        "robot_type: r\nfps: 10\nobservations:\n  - {key: s, topic: /level, type: std_msgs/msg/Float64}\n",
+        "c",
+    )
+    timeline = Timeline(topics={"/level": TopicTimeline("/level", log_ns, None)}, tasks=())
+    with pytest.raises(AlignmentError) as caught:
+        align_sources(plan, timeline, "bag")
+    said = str(caught.value)
+    assert "the episode would last 1,700,000,002 s (1970-01-01 00:00:00 UTC to 2023-11-14" in said
+    assert "no stream has a message from 1970-01-01 00:00:00 UTC to 2023-11-14 22:13:20 UTC" in said
+    assert "Fix: convert the part after the step with a manifest window" in said

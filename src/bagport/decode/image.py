@@ -21,6 +21,7 @@ import numpy as np
 import numpy.typing as npt
 import simplejpeg
 from PIL import Image as PILImage
+from PIL import UnidentifiedImageError
 
 from bagport.decode.bayer import BAYER_PATTERNS, demosaic
 from bagport.decode.depth import DEPTH_ENCODINGS, decode_compressed_depth, depth_from_pixels
@@ -147,6 +148,13 @@ def _decode_raw(msg: Any) -> npt.NDArray[Any]:
             f"raw image encoding {msg.encoding!r} is not supported (supported: {sorted(_LAYOUT)})",
             fix="convert the topic, or map it with a custom decoder.",
         )
+    if int(msg.height) == 0 or int(msg.width) == 0:
+        raise DecodeError(
+            f"the image is empty ({int(msg.width)}x{int(msg.height)} {msg.encoding}): a camera driver publishes such "
+            "messages before its first frame or after a glitch",
+            fix="convert from after it with a manifest window (start_ns/start_s), or leave the topic out of the "
+            "contract; bagport does not make a frame of it (it would be black).",
+        )
     pixels = _pixels(msg, encoding)
     if encoding in DEPTH_ENCODINGS:
         return depth_from_pixels(pixels[:, :, 0], encoding)
@@ -178,6 +186,14 @@ def _decode_png(payload: bytes, fmt: str) -> npt.NDArray[Any]:
         return np.asarray(img.convert("RGB"), dtype=np.uint8)
 
 
+_VIDEO_CODECS = ("h264", "h265", "hevc", "av1", "vp8", "vp9")
+_VIDEO_IN_IMAGE_FIX = (
+    "its format names a video codec: a video stream's packets depend on each other, so bagport reads them from "
+    "video message types (foxglove_msgs/CompressedVideo, ffmpeg_image_transport_msgs/FFMPEGPacket; see "
+    "'Video streams' in docs/contracts.md), not from sensor_msgs/CompressedImage."
+)
+
+
 def _decode_compressed(msg: Any) -> npt.NDArray[Any]:
     payload = msg.data.tobytes() if isinstance(msg.data, np.ndarray) else bytes(msg.data)
     fmt = str(msg.format).lower()
@@ -188,6 +204,14 @@ def _decode_compressed(msg: Any) -> npt.NDArray[Any]:
         if is_jpeg:
             return np.asarray(simplejpeg.decode_jpeg(payload, colorspace="RGB"), dtype=np.uint8)
         return _decode_png(payload, fmt)
+    except UnidentifiedImageError:
+        raise DecodeError(
+            f"compressed image (format {msg.format!r}, {len(payload)} bytes) is neither JPEG nor PNG",
+            fix=_VIDEO_IN_IMAGE_FIX
+            if any(codec in fmt for codec in _VIDEO_CODECS)
+            else "the message payload is "
+            "corrupt, or in a format bagport does not read as an image (it reads JPEG and PNG).",
+        ) from None
     except (ValueError, OSError) as err:
         raise DecodeError(
             f"compressed image (format {msg.format!r}, {len(payload)} bytes) cannot be decoded: {err}",

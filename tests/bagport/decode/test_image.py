@@ -295,3 +295,36 @@ def test_packed_yuv422_gives_the_true_colours(encoding: str) -> None:
 def test_packed_yuv422_with_an_odd_width_is_an_error() -> None:
     with pytest.raises(DecodeError, match=r"a yuv422 image has 3 pixels a row, .* the width must be even"):
         decode_image(_image("yuv422", np.zeros((2, 3, 2), dtype=np.uint8)), IMAGE)
+
+
+def _empty_image(height: int, width: int) -> Any:
+    return Image(
+        header=Header(stamp=Time(sec=1, nanosec=0), frame_id=""),
+        height=height,
+        width=width,
+        encoding="rgb8",
+        is_bigendian=0,
+        step=width * 3,
+        data=np.zeros(0, dtype=np.uint8),
+    )
+
+
+@pytest.mark.parametrize("shape", [(0, 0, 3), (0, 8, 3), (6, 0, 3)])
+def test_an_empty_image_is_an_error_not_a_black_frame(shape: tuple[int, int, int]) -> None:
+    """Camera drivers publish 0x0 images before their first frame: no pixels, so no frame (a resize would have
+    made it black without a sign)."""
+    with pytest.raises(
+        DecodeError, match=r"the image is empty \(\d+x\d+ rgb8\): a camera driver publishes"
+    ) as caught:
+        decode_image(_empty_image(*shape[:2]), "sensor_msgs/msg/Image")
+    assert "manifest window" in caught.value.fix
+
+
+def test_a_compressed_image_that_is_video_says_which_types_carry_video() -> None:
+    with pytest.raises(DecodeError, match=r"\(format 'h264', 5 bytes\) is neither JPEG nor PNG") as caught:
+        decode_image(_compressed("h264", b"\x00\x00\x00\x01\x67"), "sensor_msgs/msg/CompressedImage")
+    assert "foxglove_msgs/CompressedVideo" in caught.value.fix
+    assert "BytesIO" not in str(caught.value)  # not the library's text, with an address
+    with pytest.raises(DecodeError, match=r"is neither JPEG nor PNG") as other:
+        decode_image(_compressed("webp", b"RIFF0000WEBP"), "sensor_msgs/msg/CompressedImage")
+    assert "it reads JPEG and PNG" in other.value.fix

@@ -275,9 +275,20 @@ class CheckedDeserializer:
         try:
             return self._deserialize(raw, msgtype)
         except Exception as err:  # rosbags raises assorted types for bytes that do not fit
+            if bytes(raw[:4]) == ZSTD_FRAME_MAGIC:
+                raise BagReadError(
+                    f"a message of type {msgtype} is zstd-compressed on its own: rosbag2 compressed each message "
+                    "(compression_mode: message), which only the bag's metadata.yaml records",
+                    uri=self._uri,
+                    fix="give the bag's folder (its metadata.yaml beside the data files), not a data file alone.",
+                ) from None
             raise mismatch_error(
                 self._uri, msgtype, self._sources.get(msgtype, "its definition"), err
             ) from err
+
+
+ZSTD_FRAME_MAGIC = b"\x28\xb5\x2f\xfd"
+"""The first bytes of a zstd frame: a message rosbag2 compressed on its own (``compression_mode: message``)."""
 
 
 def prepare_reading() -> None:

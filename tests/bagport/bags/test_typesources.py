@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 import pytest
-from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.rosbag2 import CompressionFormat, CompressionMode, StoragePlugin, Writer
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
 from bagport.bags import open_bag, read_msg_path
@@ -305,3 +305,26 @@ def test_a_bag_without_definitions_blames_the_bundled_one_not_the_bag(
     text = str(caught.value)
     assert "does not match bagport's bundled" in text
     assert "embedded in the bag" not in text
+
+
+@pytest.mark.parametrize("plugin", [StoragePlugin.MCAP, StoragePlugin.SQLITE3])
+def test_a_data_file_of_a_bag_compressed_message_by_message_says_to_give_its_folder(
+    tmp_path: Path, plugin: StoragePlugin
+) -> None:
+    """rosbag2's compression_mode message: each message is a zstd frame, which only metadata.yaml says. The
+    folder reads; its data file alone was called damaged ("copy the bag again")."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    level = "std_msgs/msg/Float64"
+    folder = tmp_path / "rec"
+    writer = Writer(folder, version=9, storage_plugin=plugin)
+    writer.set_compression(CompressionMode.MESSAGE, CompressionFormat.ZSTD)
+    with writer:
+        connection = writer.add_connection("/level", level, typestore=store)
+        writer.write(connection, 10**9, store.serialize_cdr(store.types[level](data=1.5), level))
+    with open_bag(str(folder)) as reader:
+        assert [m.msg().data for m in reader.messages(("/level",))] == [1.5]
+    data_file = next(p for p in folder.iterdir() if p.name != "metadata.yaml")
+    with open_bag(str(data_file)) as reader, pytest.raises(BagReadError) as caught:
+        [m.msg() for m in reader.messages(("/level",))]
+    assert f"a message of type {level} is zstd-compressed on its own" in str(caught.value)
+    assert "give the bag's folder (its metadata.yaml beside the data files)" in caught.value.fix

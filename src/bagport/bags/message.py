@@ -44,6 +44,25 @@ def stamp_from_raw(raw: bytes | memoryview, layout: str) -> int | None:
     return int(sec) * 1_000_000_000 + int(nanosec)
 
 
+def fields_after_header(raw: bytes | memoryview, layout: str, fmt: str) -> tuple[int, ...] | None:
+    """The fields right after a leading std_msgs/Header (its stamp and frame_id skipped), unpacked with the
+    struct format ``fmt`` (``"II"``: an Image's height and width), without deserialising; ``None`` when the
+    bytes end first or the layout has no such header."""
+    try:
+        if layout == HeaderLayout.CDR:
+            order = "<" if raw[1] == 1 else ">"
+            (frame_id_bytes,) = struct.unpack_from(order + "I", raw, 12)  # encapsulation 4, stamp 8
+            after = 16 + frame_id_bytes
+            after += -(after - 4) % 4  # CDR aligns from the end of the encapsulation header
+            return struct.unpack_from(order + fmt, raw, after)
+        if layout == HeaderLayout.ROS1:
+            (frame_id_bytes,) = struct.unpack_from("<I", raw, 12)  # seq 4, stamp 8
+            return struct.unpack_from("<" + fmt, raw, 16 + frame_id_bytes)
+    except (struct.error, IndexError):
+        return None
+    return None
+
+
 class BagMessage:
     __slots__ = ("_deserialize", "_layout", "_msg", "_raw", "log_time_ns", "msgtype", "topic", "uri")
 
@@ -84,6 +103,10 @@ class BagMessage:
                     "manifest entry's start_s/end_s.",
                 ) from err
         return self._msg
+
+    def fields_after_header(self, fmt: str) -> tuple[int, ...] | None:
+        """:func:`fields_after_header` of this message's bytes."""
+        return None if self._layout is None else fields_after_header(self._raw, self._layout, fmt)
 
     def header_stamp_ns(self) -> int | None:
         """``header.stamp`` in ns when the type starts with a std_msgs/Header, else ``None``."""

@@ -25,6 +25,7 @@ __all__ = [
     "ContractPlan",
     "FeatureKind",
     "FeatureSpec",
+    "ImageFilter",
     "JointFilter",
     "LineOf",
     "SourceSpec",
@@ -53,7 +54,14 @@ class JointFilter(NamedTuple):
     joints: tuple[str, ...]
 
 
-StreamFilter = TransformFilter | JointFilter
+class ImageFilter(NamedTuple):
+    """Only the raw images of ``topic`` that have pixels are samples: a camera driver publishes empty (0x0)
+    images before its first frame or after a glitch, which are no frame (the previous one holds)."""
+
+    topic: str
+
+
+StreamFilter = TransformFilter | JointFilter | ImageFilter
 """Which messages of a topic are the samples of a stream (every message when there is none)."""
 
 
@@ -119,6 +127,8 @@ class SourceSpec:
             return TransformFilter(self.topic, self.child_frame, self.parent_frame)
         if self.joints:
             return JointFilter(self.topic, self.joints)
+        if self.msgtype == RosType.IMAGE:
+            return ImageFilter(self.topic)
         return None
 
     def where(self, source_name: str) -> str:

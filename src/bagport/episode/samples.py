@@ -2,14 +2,14 @@
 
 A TF stream's samples are the /tf messages carrying its transform; a JointState stream selecting joints
 by name takes the messages naming all its joints, so publishers with different joints (an arm's and a
-gripper's driver) may share ``/joint_states``. The timeline (pass 1), the replay (pass 2) and the
+gripper's driver) may share ``/joint_states``; a raw camera's are its images with pixels. The timeline (pass 1), the replay (pass 2) and the
 contract check ask the same question through one :class:`SampleTest` per stream.
 """
 
 from __future__ import annotations
 
 from bagport.bags import BagMessage
-from bagport.contract.plan import JointFilter, StreamFilter, TransformFilter
+from bagport.contract.plan import ImageFilter, JointFilter, StreamFilter, TransformFilter
 from bagport.decode import child_frames, find_transform, transform_stamp_ns
 from bagport.decode.joint_state_cdr import JointStateCdr
 
@@ -131,12 +131,48 @@ class _JointTest(SampleTest):
         )
 
 
+class _ImageTest(SampleTest):
+    """A raw camera's messages with pixels (drivers publish empty 0x0 images before their first frame)."""
+
+    field = "topic"
+
+    def __init__(self, spec: ImageFilter) -> None:
+        super().__init__(spec)
+        self.empty = 0
+
+    def carries(self, message: BagMessage) -> bool:
+        size = message.fields_after_header("II")  # height, width
+        if size is None:
+            msg = message.msg()
+            size = (int(msg.height), int(msg.width))
+        if size[0] and size[1]:
+            return True
+        self.empty += 1
+        return False
+
+    def wanted(self) -> str:
+        return "an image with pixels"
+
+    def seen_text(self) -> str:
+        return f"{self.empty} empty (0x0) image(s)"
+
+    def fix(self) -> str:
+        return (
+            "the camera published no frame in this bag or window: check the camera, or leave the topic out."
+        )
+
+
 def sample_tests(filters: dict[str, StreamFilter]) -> dict[str, SampleTest]:
     """A test per filtered stream (a stream name -> its test)."""
-    return {
-        stream: _TransformTest(spec) if isinstance(spec, TransformFilter) else _JointTest(spec)
-        for stream, spec in filters.items()
-    }
+    return {stream: _test(spec) for stream, spec in filters.items()}
+
+
+def _test(spec: StreamFilter) -> SampleTest:
+    if isinstance(spec, TransformFilter):
+        return _TransformTest(spec)
+    if isinstance(spec, JointFilter):
+        return _JointTest(spec)
+    return _ImageTest(spec)
 
 
 class JointListGuard:

@@ -205,3 +205,69 @@ def test_an_entry_selecting_by_index_on_a_shared_topic_is_refused_not_mixed(
     assert "observations[key=observation.state]) selects by index" in str(converted)
     named = parse_contract(text.replace("['position[0]']", "['position[0]', j1]"), "c.yaml")
     assert named.one_joint_list_topics() == {}  # a joint named: the entry reads the messages naming it
+
+
+COLOURS = ((200, 40, 10), (30, 220, 90), (5, 60, 250), (120, 130, 140))
+
+
+def _camera_bag(path: Path, storage: Literal["mcap", "ros1"], empty: set[int]) -> Path:
+    """A raw rgb8 camera at FPS, message k one solid colour, the messages in ``empty`` 0x0 (no pixels)."""
+    store = TS1 if storage == "ros1" else TS
+    types = store.types
+    messages = []
+    for k in range(FRAMES):
+        t_ns = START_NS + k * PERIOD_NS
+        stamp = types["builtin_interfaces/msg/Time"](sec=t_ns // 10**9, nanosec=t_ns % 10**9)
+        header = types["std_msgs/msg/Header"]
+        pixels = (
+            np.zeros((0,), np.uint8) if k in empty else np.tile(np.array(COLOURS[k % 4], np.uint8), 32 * 48)
+        )
+        side = (0, 0) if k in empty else (32, 48)
+        image = types["sensor_msgs/msg/Image"](
+            header=header(seq=0, stamp=stamp, frame_id="cam") if store is TS1 else header(stamp=stamp, frame_id="cam"),
+            height=side[0], width=side[1], encoding="rgb8", is_bigendian=0, step=side[1] * 3, data=pixels,
+        )  # fmt: skip
+        messages.append((t_ns, image))
+    return write_bag(path, storage, store, [("/cam", "sensor_msgs/msg/Image", messages)])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("storage", ["mcap", "ros1"])
+def test_empty_images_are_no_frames_the_previous_one_holds(
+    tmp_path: Path, storage: Literal["mcap", "ros1"]
+) -> None:
+    """Camera drivers publish 0x0 images before their first frame or after a glitch: they are not samples, so
+    the grid starts at the first image with pixels and a frame at an empty one holds the one before."""
+    from lerobot.datasets.lerobot_dataset import LeRobotDataset  # noqa: PLC0415 - heavy
+
+    bag = _camera_bag(tmp_path / "cam", storage, empty={0, 1, 6})
+    text = (
+        f"robot_type: r\nfps: {FPS}\ndefault_task: look\nobservations:\n"
+        "  - {key: observation.images.cam, topic: /cam, type: sensor_msgs/msg/Image}\n"
+    )
+    plan = parse_contract(text, "c.yaml")
+    with open_bag(str(bag)) as reader:
+        assert scan_plan_timeline(reader, plan).topics["/cam"].passed_over == 3
+    assert describe_features(plan, str(bag))[0].shape == (32, 48, 3)  # the first image with pixels
+    out = convert_in_process(str(bag), text, tmp_path)
+    dataset = LeRobotDataset("test/cam", root=out, video_backend="pyav")
+    shown = [
+        dataset[k]["observation.images.cam"].numpy().mean(axis=(1, 2)) * 255 for k in range(len(dataset))
+    ]
+    written = [COLOURS[k % 4] for k in range(2, FRAMES)]  # frame 0 at message 2
+    written[6 - 2] = COLOURS[5 % 4]  # message 6 is empty: message 5's frame holds
+    assert len(shown) == len(written)
+    for k, (got, want) in enumerate(zip(shown, written, strict=True)):
+        assert np.abs(got - np.array(want)).max() < 10, (k, got, want)
+
+
+def test_a_camera_of_empty_images_only_is_refused(tmp_path: Path) -> None:
+    bag = _camera_bag(tmp_path / "cam", "mcap", empty=set(range(FRAMES)))
+    plan = parse_contract(
+        f"robot_type: r\nfps: {FPS}\nobservations:\n  - {{key: observation.images.cam, topic: /cam, "
+        "type: sensor_msgs/msg/Image}\n",
+        "c.yaml",
+    )
+    checked, converted = _refused(plan, bag)
+    assert f"carries an image with pixels ({FRAMES} empty (0x0) image(s))" in str(checked)
+    assert "the camera published no frame" in str(converted)

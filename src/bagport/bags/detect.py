@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bagport.bags.metadata_yaml import read_metadata
-from bagport.bags.records import Storage
+from bagport.bags.records import ZSTD_FRAME_MAGIC, Storage
 from bagport.bags.remote import RemotePath
 from bagport.errors import BagReadError
 
@@ -53,6 +53,14 @@ def _file_storage(path: Path | RemotePath, uri: str) -> Storage:
             f"is a ROS 1 bag of an unsupported version ({head[:13]!r})",
             uri=uri,
             fix="migrate it with `rosbag fix` to format 2.0.",
+        )
+    if head.startswith(ZSTD_FRAME_MAGIC):
+        raise BagReadError(
+            "is compressed whole with zstd (rosbag2's compression_mode: file writes .mcap.zstd and .db3.zstd files, "
+            "which the bag's metadata.yaml describes)",
+            uri=uri,
+            fix="give the bag's folder (its metadata.yaml beside the file), or decompress the file (`zstd -d FILE`) "
+            "and give the result.",
         )
     raise BagReadError(
         "is not a ROS bag (no ROS 1, MCAP or SQLite signature at its start)",

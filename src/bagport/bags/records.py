@@ -6,7 +6,11 @@ from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import Any
 
-__all__ = ["BagInfo", "Checksums", "Storage", "TopicInfo", "compressed_whole"]
+__all__ = ["ZSTD_FRAME_MAGIC", "BagInfo", "Checksums", "Storage", "TopicInfo", "compressed_whole"]
+
+
+ZSTD_FRAME_MAGIC = b"\x28\xb5\x2f\xfd"
+"""The first bytes of a zstd frame: a data file rosbag2 compressed whole, or a message it compressed alone."""
 
 
 def compressed_whole(file_name: str) -> bool:

@@ -28,6 +28,7 @@ from rosbags.typesys import Stores, TypesysError, get_types_from_msg, get_typest
 from rosbags.typesys.store import Typestore
 
 from bagport.bags.bundled import BUNDLED_DEFINITIONS
+from bagport.bags.records import ZSTD_FRAME_MAGIC
 from bagport.bags.typeload import one_line
 from bagport.errors import BagReadError, DecodeError
 from bagport.uris import UTF8_FIX
@@ -285,10 +286,6 @@ class CheckedDeserializer:
             raise mismatch_error(
                 self._uri, msgtype, self._sources.get(msgtype, "its definition"), err
             ) from err
-
-
-ZSTD_FRAME_MAGIC = b"\x28\xb5\x2f\xfd"
-"""The first bytes of a zstd frame: a message rosbag2 compressed on its own (``compression_mode: message``)."""
 
 
 def prepare_reading() -> None:

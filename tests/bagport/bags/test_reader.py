@@ -7,6 +7,7 @@ from pathlib import Path
 
 import fsspec
 import pytest
+import zstandard
 
 from bagport.bags import Storage, format_bag_info, open_bag
 from bagport.errors import BagReadError
@@ -101,6 +102,12 @@ def test_corruption_ladder(tmp_path: Path) -> None:
     noise.write_bytes(b"definitely not a bag" * 10)
     with pytest.raises(BagReadError, match="is not a ROS bag"):
         open_bag(str(noise))
+    compressed = (
+        tmp_path / "episode_0.mcap.zstd"
+    )  # rosbag2's compression_mode: file, given without its folder
+    compressed.write_bytes(zstandard.ZstdCompressor().compress(b"\x89MCAP0\r\n" + b"\x00" * 64))
+    with pytest.raises(BagReadError, match=r"is compressed whole with zstd .*Fix: give the bag's folder"):
+        open_bag(str(compressed))
     folder = tmp_path / "folder"
     folder.mkdir()
     with pytest.raises(BagReadError, match=r"folder without metadata\.yaml"):

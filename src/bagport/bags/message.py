@@ -44,23 +44,28 @@ def stamp_from_raw(raw: bytes | memoryview, layout: str) -> int | None:
     return int(sec) * 1_000_000_000 + int(nanosec)
 
 
-def fields_after_header(raw: bytes | memoryview, layout: str, fmt: str) -> tuple[int, ...] | None:
-    """The fields right after a leading std_msgs/Header (its stamp and frame_id skipped), unpacked with the
-    struct format ``fmt`` (``"II"``: an Image's height and width), without deserialising; ``None`` when the
-    bytes end first or the layout has no such header."""
+def fields_after_header(
+    raw: bytes | memoryview, layout: str, fmt: str, strings: int = 0
+) -> tuple[int, ...] | None:
+    """The fields right after a leading std_msgs/Header (its stamp and frame_id skipped, then ``strings``
+    string fields), unpacked with the struct format ``fmt`` (``"II"``: an Image's height and width), without
+    deserialising; ``None`` when the bytes end first or the layout has no such header."""
+    if layout not in (HeaderLayout.CDR, HeaderLayout.ROS1):
+        return None
+    cdr = layout == HeaderLayout.CDR
+    order = ("<" if raw[1] == 1 else ">") if cdr else "<"
     try:
-        if layout == HeaderLayout.CDR:
-            order = "<" if raw[1] == 1 else ">"
-            (frame_id_bytes,) = struct.unpack_from(order + "I", raw, 12)  # encapsulation 4, stamp 8
-            after = 16 + frame_id_bytes
-            after += -(after - 4) % 4  # CDR aligns from the end of the encapsulation header
-            return struct.unpack_from(order + fmt, raw, after)
-        if layout == HeaderLayout.ROS1:
-            (frame_id_bytes,) = struct.unpack_from("<I", raw, 12)  # seq 4, stamp 8
-            return struct.unpack_from("<" + fmt, raw, 16 + frame_id_bytes)
+        at = 12  # CDR: encapsulation 4 + stamp 8; ROS 1: seq 4 + stamp 8
+        for _ in range(strings + 1):  # the frame_id, then the strings
+            (length,) = struct.unpack_from(order + "I", raw, at)
+            at += 4 + length
+            if cdr:
+                at += -(at - 4) % 4  # CDR aligns from the end of the encapsulation header
+        if at > len(raw):
+            return None
+        return struct.unpack_from(order + fmt, raw, at)
     except (struct.error, IndexError):
         return None
-    return None
 
 
 class BagMessage:
@@ -104,9 +109,9 @@ class BagMessage:
                 ) from err
         return self._msg
 
-    def fields_after_header(self, fmt: str) -> tuple[int, ...] | None:
+    def fields_after_header(self, fmt: str, strings: int = 0) -> tuple[int, ...] | None:
         """:func:`fields_after_header` of this message's bytes."""
-        return None if self._layout is None else fields_after_header(self._raw, self._layout, fmt)
+        return None if self._layout is None else fields_after_header(self._raw, self._layout, fmt, strings)
 
     def header_stamp_ns(self) -> int | None:
         """``header.stamp`` in ns when the type starts with a std_msgs/Header, else ``None``."""

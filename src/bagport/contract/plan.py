@@ -55,10 +55,12 @@ class JointFilter(NamedTuple):
 
 
 class ImageFilter(NamedTuple):
-    """Only the raw images of ``topic`` that have pixels are samples: a camera driver publishes empty (0x0)
-    images before its first frame or after a glitch, which are no frame (the previous one holds)."""
+    """Only the images of ``topic`` that have pixels (a compressed one: bytes) are samples: a camera driver
+    publishes empty (0x0) images before its first frame or after a glitch, which are no frame (the previous
+    one holds)."""
 
     topic: str
+    compressed: bool
 
 
 StreamFilter = TransformFilter | JointFilter | ImageFilter
@@ -127,8 +129,8 @@ class SourceSpec:
             return TransformFilter(self.topic, self.child_frame, self.parent_frame)
         if self.joints:
             return JointFilter(self.topic, self.joints)
-        if self.msgtype == RosType.IMAGE:
-            return ImageFilter(self.topic)
+        if self.msgtype in (RosType.IMAGE, RosType.COMPRESSED_IMAGE):
+            return ImageFilter(self.topic, compressed=self.msgtype == RosType.COMPRESSED_IMAGE)
         return None
 
     def where(self, source_name: str) -> str:

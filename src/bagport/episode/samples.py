@@ -2,7 +2,7 @@
 
 A TF stream's samples are the /tf messages carrying its transform; a JointState stream selecting joints
 by name takes the messages naming all its joints, so publishers with different joints (an arm's and a
-gripper's driver) may share ``/joint_states``; a raw camera's are its images with pixels. The timeline (pass 1), the replay (pass 2) and the
+gripper's driver) may share ``/joint_states``; a camera's are its images with pixels. The timeline (pass 1), the replay (pass 2) and the
 contract check ask the same question through one :class:`SampleTest` per stream.
 """
 
@@ -132,20 +132,21 @@ class _JointTest(SampleTest):
 
 
 class _ImageTest(SampleTest):
-    """A raw camera's messages with pixels (drivers publish empty 0x0 images before their first frame)."""
+    """A camera's messages with pixels (drivers publish empty images before their first frame)."""
 
     field = "topic"
 
     def __init__(self, spec: ImageFilter) -> None:
         super().__init__(spec)
+        self._compressed = spec.compressed
         self.empty = 0
 
     def carries(self, message: BagMessage) -> bool:
-        size = message.fields_after_header("II")  # height, width
-        if size is None:
-            msg = message.msg()
-            size = (int(msg.height), int(msg.width))
-        if size[0] and size[1]:
+        if self._compressed:  # format, then the data's length
+            size = message.fields_after_header("I", strings=1) or (len(message.msg().data),)
+        else:  # height, width
+            size = message.fields_after_header("II") or (int(message.msg().height), int(message.msg().width))
+        if all(size):
             return True
         self.empty += 1
         return False
@@ -154,7 +155,7 @@ class _ImageTest(SampleTest):
         return "an image with pixels"
 
     def seen_text(self) -> str:
-        return f"{self.empty} empty (0x0) image(s)"
+        return f"{self.empty} empty image(s)"
 
     def fix(self) -> str:
         return (

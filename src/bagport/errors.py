@@ -18,6 +18,7 @@ __all__ = [
     "DatasetWriteError",
     "DecodeError",
     "EncoderSettingsError",
+    "FrameShapeError",
     "ManifestError",
     "OutputInBagError",
     "OutputTakenError",
@@ -157,6 +158,16 @@ class AlignmentError(BagportError):
 
 class VideoError(BagportError):
     """Encoding, remuxing or decoding a video failed."""
+
+
+class FrameShapeError(VideoError):
+    """A frame a clip cannot take as it is: odd sides for 4:2:0 video, or another size than the clip's."""
+
+    def __init__(self, what: str, *, path: str, fix: str) -> None:
+        self.what = what
+        self.path = path
+        self.fix = fix
+        super().__init__(f"{path}: {what}. Fix: {fix}")
 
 
 class EncoderSettingsError(VideoError):

@@ -132,7 +132,9 @@ def _stage(episode: _Episode) -> EpisodeSummary:
     monitor = ValueMonitor(episode.qa_config.values, plan.fps, alignment.frames)
     gop = episode.settings.g or 1
     fidelity = EpisodeFidelity(episode.qa_config.video, workdir, gop)  # its files go before publishing
-    sinks = EpisodeSinks(workdir, plan, episode.settings, episode.frame_tasks, monitor, fidelity)
+    sinks = EpisodeSinks(
+        workdir, plan, episode.settings, episode.frame_tasks, monitor, fidelity, episode.request.bag_uri
+    )
     features = [f for f in plan.features if f.key not in episode.reused]
     try:
         for frame in iter_frames(

@@ -34,7 +34,7 @@ from bagport.decode import ImageKind
 from bagport.episode.alignment import AlignedSource
 from bagport.episode.assemble import Frame
 from bagport.episode.fidelity import EpisodeFidelity
-from bagport.errors import DecodeError
+from bagport.errors import DecodeError, FrameShapeError
 from bagport.qa import ValueMonitor
 from bagport.staging import FRAMES_FILE
 from bagport.stats import ImageStatsAccumulator, episode_sketch_fields, stats_to_json, vector_stats
@@ -301,8 +301,9 @@ class EpisodeSinks:
         frame_tasks: Sequence[str],
         monitor: ValueMonitor,
         fidelity: EpisodeFidelity,
+        bag_uri: str,
     ) -> None:
-        self.workdir, self.plan, self.settings = workdir, plan, settings
+        self.workdir, self.plan, self.settings, self.bag_uri = workdir, plan, settings, bag_uri
         self.frame_tasks, self.monitor, self.fidelity = frame_tasks, monitor, fidelity
         vector_dtypes = {f.key: f.dtype for f in plan.features if f.kind is FeatureKind.VECTOR}
         (workdir / "videos").mkdir(parents=True, exist_ok=True)
@@ -315,20 +316,17 @@ class EpisodeSinks:
 
     def add(self, frame: Frame) -> None:
         for key, image in frame.images.items():
-            camera = self.cameras.get(key)
-            if camera is None:
-                camera = CameraSink(
-                    self.workdir / "videos" / f"{key}.mp4",
-                    self._camera_sources[key],
-                    image,
-                    frame.kinds[key],
-                    self.plan.fps,
-                    self.settings,
-                    self.fidelity,
-                    self.monitor,
-                )
-                self.cameras[key] = camera
-            camera.write(frame.index, image)
+            try:
+                self._camera(key, image, frame).write(frame.index, image)
+            except FrameShapeError as err:  # the camera's, not the staged clip's: say which and where
+                source = self._camera_sources[key]
+                raise DecodeError(
+                    f"camera {key}: {err.what} ({source.entry_text(self.plan.source_name)})",
+                    uri=self.bag_uri,
+                    topic=source.topic,
+                    t_ns=frame.tick_ns,
+                    fix=err.fix,
+                ) from None
         for key, vec in frame.vectors.items():
             width = self.widths.setdefault(key, vec.shape[0])
             if vec.shape[0] != width:
@@ -340,6 +338,21 @@ class EpisodeSinks:
         self.names = frame.names
         self.monitor.add_vectors(frame.index, frame.vectors)
         self.frames.add(frame.index, self.frame_tasks[frame.index], frame.vectors)
+
+    def _camera(self, key: str, first: npt.NDArray[Any], frame: Frame) -> CameraSink:
+        camera = self.cameras.get(key)
+        if camera is None:
+            camera = self.cameras[key] = CameraSink(
+                self.workdir / "videos" / f"{key}.mp4",
+                self._camera_sources[key],
+                first,
+                frame.kinds[key],
+                self.plan.fps,
+                self.settings,
+                self.fidelity,
+                self.monitor,
+            )
+        return camera
 
     def close(self) -> dict[str, ClipInfo]:
         """Close every writer; returns video clip infos by key."""

@@ -16,7 +16,7 @@ import av
 import numpy as np
 import numpy.typing as npt
 
-from bagport.errors import EncoderSettingsError, VideoError
+from bagport.errors import EncoderSettingsError, FrameShapeError, VideoError
 from bagport.video.depth import DEPTH_PIX_FMT
 from bagport.video.settings import EncoderSettings
 
@@ -42,9 +42,10 @@ class StreamingEncoder:
         self, path: str | Path, *, fps: int, width: int, height: int, settings: EncoderSettings
     ) -> None:
         if settings.pix_fmt.startswith("yuv420") and (width % 2 or height % 2):
-            raise VideoError(
-                f"{path}: {width}x{height} frames cannot be encoded as {settings.pix_fmt} (needs even width and "
-                "height). Fix: set 'image: {resize: [h, w]}' with even numbers for this camera in the contract."
+            raise FrameShapeError(
+                f"{width}x{height} frames cannot be encoded as {settings.pix_fmt} (needs even width and height)",
+                path=str(path),
+                fix="set 'image: {resize: [h, w]}' with even numbers for this camera in the contract.",
             )
         self._path = Path(path)
         self._fps = fps
@@ -70,10 +71,10 @@ class StreamingEncoder:
     def write(self, image: npt.NDArray[np.uint8] | npt.NDArray[np.uint16]) -> None:
         """The next frame: RGB uint8 (H, W, 3), or for a depth clip uint16 depth codes (H, W)."""
         if image.shape != self._shape or image.dtype != self._dtype:
-            raise VideoError(
-                f"{self._path}: frame {self._frames} is {image.dtype}{list(image.shape)}, the clip is "
-                f"{self._dtype}{list(self._shape)}. Fix: set 'image: {{resize: [h, w]}}' so every frame has "
-                "one size."
+            raise FrameShapeError(
+                f"frame {self._frames} is {image.dtype}{list(image.shape)}, the clip is {self._dtype}{list(self._shape)}",
+                path=str(self._path),
+                fix="set 'image: {resize: [h, w]}' so every frame has one size.",
             )
         if self._depth:
             frame = av.VideoFrame.from_ndarray(

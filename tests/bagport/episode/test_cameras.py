@@ -29,6 +29,7 @@ from bagport.synth import CameraSpec, EpisodeSpec, GroundTruth, render_frame, wr
 from bagport.synth.images import depth_frame, recorded_depth
 from bagport.video.depth import DepthQuantizer
 from bagport.video.settings import EncoderSettings
+from tests.helpers import episode_request
 
 NS = 1_000_000_000
 FPS = 30
@@ -262,3 +263,20 @@ def test_an_empty_depth_range_is_a_contract_error() -> None:
     bad["observations"][1]["image"] = {"depth_range_m": [3.0, 1.0]}
     with pytest.raises(ContractError, match=r"depth_range_m \[3.0, 1.0\] must be \[min, max\] metres"):
         parse_contract(yaml.safe_dump(bad), "c.yaml")
+
+
+def test_a_camera_of_odd_sides_is_named_with_its_topic_and_entry(tmp_path: Path) -> None:
+    """4:2:0 video needs even sides: the error names the camera's topic and contract entry, not the clip being
+    written in the episode's scratch folder."""
+    camera = CameraSpec("front", "raw", "bgr8", height=33, width=49)
+    spec = EpisodeSpec(duration_s=0.3, cameras=(camera,), task="look")
+    write_episode_bag(tmp_path / "bag", "mcap", spec)
+    request = episode_request(tmp_path / "bag", tmp_path / "staging", _contract((camera,)))  # 4:2:0
+    with pytest.raises(DecodeError) as caught:
+        convert_episode(request)
+    said = str(caught.value)
+    assert "camera observation.images.front: 49x33 frames cannot be encoded as yuv420p" in said
+    assert "(contract.yaml:6, observations[key=observation.images.front])" in said
+    assert caught.value.topic == camera.topic
+    assert ".mp4" not in said
+    assert "with even numbers for this camera" in caught.value.fix

@@ -145,6 +145,12 @@ class DecodeError(BagportError):
             self.what, uri=self.uri or uri, topic=self.topic or topic, t_ns=self.t_ns or t_ns, fix=self.fix
         )
 
+    def at_entry(self, entry: str) -> DecodeError:
+        """The same error naming the contract entry (``contract.yaml:12, observations[key=...]``) it met."""
+        return DecodeError(
+            f"{self.what} ({entry})", uri=self.uri, topic=self.topic, t_ns=self.t_ns, fix=self.fix
+        )
+
 
 class AlignmentError(BagportError):
     """Streams cannot be put on the frame grid (no overlap, missing data)."""

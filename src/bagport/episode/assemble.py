@@ -21,7 +21,7 @@ import numpy.typing as npt
 
 from bagport.align import QuaternionGroup, blend, quaternion_groups
 from bagport.bags import BagMessage, BagReader
-from bagport.contract.plan import FeatureKind, FeatureSpec, SourceSpec
+from bagport.contract.plan import FeatureKind, FeatureSpec
 from bagport.decode import (
     ImageKind,
     VectorExtractor,
@@ -161,17 +161,6 @@ def _decode(source: _SourceStream, message: BagMessage) -> Any:
     return source.extractor(msg)
 
 
-def _at_entry(err: DecodeError, src: SourceSpec, contract_name: str) -> DecodeError:
-    """The error naming the contract entry whose selector or decoder met the message."""
-    return DecodeError(
-        f"{err.what} ({src.entry_text(contract_name)})",
-        uri=err.uri,
-        topic=err.topic,
-        t_ns=err.t_ns,
-        fix=err.fix,
-    )
-
-
 class _Streaming:
     """The state of one pass 2: which streams arrived how far, and the next tick to emit."""
 
@@ -224,7 +213,7 @@ class _Streaming:
                 stream.video = VideoFeed(stream.needed, stream.src.resize_hw, messages)
             except DecodeError as err:
                 located = err.located(uri=self.uri, topic=stream.src.topic, t_ns=0)
-                raise _at_entry(located, stream.src, self.contract_name) from err
+                raise located.at_entry(stream.src.entry_text(self.contract_name)) from err
 
     def ready_frames(self) -> Iterator[Frame]:
         """The frames every source has delivered for, in order."""
@@ -274,7 +263,7 @@ class _Streaming:
                         source.cache[index] = _decode(source, message)
                     except DecodeError as err:
                         located = err.located(uri=self.uri, topic=message.topic, t_ns=message.log_time_ns)
-                        raise _at_entry(located, source.src, self.contract_name) from err
+                        raise located.at_entry(source.src.entry_text(self.contract_name)) from err
                     if not had_extractor and source.extractor is not None:
                         self._name(source.src.key)
         return wanted
@@ -301,7 +290,7 @@ class _Streaming:
             except DecodeError as err:
                 t_ns = 0 if message is None else message.log_time_ns
                 located = err.located(uri=self.uri, topic=source.src.topic, t_ns=t_ns)
-                raise _at_entry(located, source.src, self.contract_name) from err
+                raise located.at_entry(source.src.entry_text(self.contract_name)) from err
             for sample, image in frames:
                 source.cache[sample] = image
         return min(feed.watermark for _, feed in feeds)

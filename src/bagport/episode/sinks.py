@@ -321,12 +321,12 @@ class EpisodeSinks:
             except FrameShapeError as err:  # the camera's, not the staged clip's: say which and where
                 source = self._camera_sources[key]
                 raise DecodeError(
-                    f"camera {key}: {err.what} ({source.entry_text(self.plan.source_name)})",
+                    f"camera {key}: {err.what}",
                     uri=self.bag_uri,
                     topic=source.topic,
                     t_ns=frame.tick_ns,
                     fix=err.fix,
-                ) from None
+                ).at_entry(source.entry_text(self.plan.source_name)) from None
         for key, vec in frame.vectors.items():
             width = self.widths.setdefault(key, vec.shape[0])
             if vec.shape[0] != width:

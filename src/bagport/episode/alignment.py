@@ -107,27 +107,44 @@ def _window(chosen: list[_Chosen], uri: str) -> tuple[int, int]:
             uri=uri,
             fix="check the topics, the stamp source (header vs receive) and action_offset_ms in the contract.",
         )
+    before, after = _longest_silence(chosen, start_ns, end_ns)
     if end_ns - start_ns > MAX_EPISODE_NS:
-        raise _clock_step_error(chosen, start_ns, end_ns, uri)
+        raise _clock_step_error(start_ns, end_ns, before, after, uri)
+    if after - before > MAX_SILENCE_NS:
+        raise AlignmentError(
+            f"no stream has a message for {(after - before) / NS_PER_S:,.0f} s, from {_utc(before)} to {_utc(after)}: "
+            "the recording paused or its clock stepped, and every frame across the silence would hold the values "
+            "before it",
+            uri=uri,
+            fix="split the bag at its silences (the contract's 'episodes: {gap_s: 5}', docs/episodes.md), or convert "
+            "a part of it with a manifest window (start_ns/end_ns).",
+        )
     return start_ns, end_ns
 
 
 MAX_EPISODE_NS = 24 * 3600 * NS_PER_S
 """An episode longer than a day is a clock that stepped while recording, not a demonstration: refused before
 its frame grid (17 billion ticks for a bag whose first messages were logged at time 0) is allocated."""
+MAX_SILENCE_NS = 60 * NS_PER_S
+"""Every stream silent for longer inside an episode: a recording paused or a clock step, refused before the
+frames across it (all holding the values before it) are encoded."""
+
+
+def _longest_silence(chosen: list[_Chosen], start_ns: int, end_ns: int) -> tuple[int, int]:
+    """The two stamps (any stream's) around the longest stretch in ``[start_ns, end_ns]`` with none."""
+    stamps = np.unique(np.concatenate([t.stamps(s) - src.offset_ns for src, t, s in chosen]))
+    stamps = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
+    if stamps.size < 2:
+        return start_ns, start_ns
+    at = int(np.argmax(np.diff(stamps)))
+    return int(stamps[at]), int(stamps[at + 1])
 
 
 def _utc(t_ns: int) -> str:
     return datetime.fromtimestamp(t_ns / NS_PER_S, tz=UTC).strftime("%Y-%m-%d %H:%M:%S UTC")
 
 
-def _clock_step_error(chosen: list[_Chosen], start_ns: int, end_ns: int, uri: str) -> AlignmentError:
-    """Where no stream has a message for the longest stretch: the clock's step, for the error."""
-    stamps = np.unique(np.concatenate([t.stamps(s) - src.offset_ns for src, t, s in chosen]))
-    stamps = stamps[(stamps >= start_ns) & (stamps <= end_ns)]
-    gaps = np.diff(stamps)
-    at = int(np.argmax(gaps)) if gaps.size else 0
-    before, after = (int(stamps[at]), int(stamps[at + 1])) if gaps.size else (start_ns, end_ns)
+def _clock_step_error(start_ns: int, end_ns: int, before: int, after: int, uri: str) -> AlignmentError:
     return AlignmentError(
         f"the episode would last {(end_ns - start_ns) / NS_PER_S:,.0f} s ({_utc(start_ns)} to {_utc(end_ns)}), more "
         f"than a day: no stream has a message from {_utc(before)} to {_utc(after)}, so the clock stepped while "

@@ -212,3 +212,32 @@ def test_an_episode_over_a_day_is_a_clock_step_refused_before_its_grid() -> None
     assert "the episode would last 1,700,000,002 s (1970-01-01 00:00:00 UTC to 2023-11-14" in said
     assert "no stream has a message from 1970-01-01 00:00:00 UTC to 2023-11-14 22:13:20 UTC" in said
     assert "Fix: convert the part after the step with a manifest window" in said
+
+
+def test_a_silence_of_every_stream_over_a_minute_is_refused_before_encoding() -> None:
+    """A recording paused for ten minutes (or a clock step): every frame across it would hold the values before
+    it. Refused, saying where, with the contract's gap split as the fix; a 50 s silence still converts."""
+    from bagport.contract import parse_contract  # noqa: PLC0415
+    from bagport.episode.alignment import align_sources  # noqa: PLC0415
+    from bagport.episode.timeline import Timeline, TopicTimeline  # noqa: PLC0415
+
+    start_ns, step_ns = 1_700_000_000_000_000_000, 100_000_000
+    plan = parse_contract(
+        "robot_type: r\nfps: 10\nobservations:\n  - {key: s, topic: /level, type: std_msgs/msg/Float64}\n",
+        "c",
+    )
+
+    def timeline(silence_s: int) -> Timeline:
+        before = [start_ns + k * step_ns for k in range(10)]
+        after = [before[-1] + silence_s * 1_000_000_000 + k * step_ns for k in range(10)]
+        log_ns = np.array(before + after, dtype=np.int64)
+        return Timeline(topics={"/level": TopicTimeline("/level", log_ns, None)}, tasks=())
+
+    with pytest.raises(AlignmentError) as caught:
+        align_sources(plan, timeline(600), "bag")
+    said = str(caught.value)
+    assert (
+        "no stream has a message for 600 s, from 2023-11-14 22:13:20 UTC to 2023-11-14 22:23:20 UTC" in said
+    )
+    assert "Fix: split the bag at its silences (the contract's 'episodes: {gap_s: 5}'" in said
+    assert align_sources(plan, timeline(50), "bag").ticks_ns.size == 10 * 50 + 19  # held across, as asked

@@ -17,9 +17,10 @@ from bagport.decode import (
     make_extractor,
     resize_image,
 )
+from bagport.decode.joint_state_cdr import joint_lists
 from bagport.decode.video import video_packet
 from bagport.episode.checks import check_bag_fits
-from bagport.episode.samples import JointListGuard, sample_tests
+from bagport.episode.samples import MIXED_JOINT_LISTS_FIX, mixed_joint_lists, sample_tests
 from bagport.errors import ContractError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
 from bagport.segment import check_episode_topics
@@ -106,25 +107,17 @@ every cycle of its driver, so a second one shows within the first few)."""
 def _check_one_joint_list(reader: BagReader, plan: ContractPlan) -> None:
     """A JointState topic an entry reads by index alone must name one joint list in all its messages."""
     entries = plan.one_joint_list_topics()
-    if not entries:
-        return
-    guards = {topic: JointListGuard(topic) for topic in entries}
-    read = dict.fromkeys(entries, 0)
-    for message in reader.messages(tuple(entries)):
-        lists = guards[message.topic].other_list(message)
-        if lists is not None:
-            src = entries[message.topic]
+    for topic, lists in joint_lists(reader, tuple(entries), _JOINT_LIST_MESSAGES).items():
+        if len(lists) > 1:
+            src = entries[topic]
             raise ContractError(
-                guards[message.topic].problem(lists, f"{src.section}[key={src.key}]")
+                mixed_joint_lists(topic, lists[0], lists[1], f"{src.section}[key={src.key}]")
                 + f" (in {reader.info.uri})",
                 file=plan.source_name,
                 line=src.line,
                 field=f"{src.section}[key={src.key}].selector.names",
-                fix=JointListGuard.fix,
+                fix=MIXED_JOINT_LISTS_FIX,
             )
-        read[message.topic] += 1
-        if all(n >= _JOINT_LIST_MESSAGES for n in read.values()):
-            return
 
 
 def _first_messages(reader: BagReader, plan: ContractPlan) -> dict[str, object]:

@@ -8,9 +8,10 @@ from collections.abc import Mapping, Sequence
 
 from bagport.bags import BagReader
 from bagport.bags.records import BagInfo, TopicInfo
+from bagport.decode.joint_state_cdr import joint_lists
 from bagport.msgtypes import IMAGE_TYPES, TF_TYPES, RosType
 
-__all__ = ["draft_contract", "draft_contract_from_bag", "joint_lists"]
+__all__ = ["draft_contract", "draft_contract_from_bag"]
 
 _JOINT_MESSAGES_READ = 400
 """Messages read per JointState topic to find its publishers' joint lists (each publishes at every cycle)."""
@@ -40,23 +41,11 @@ def _entry(key: str, topic: TopicInfo, indent: str = "  ") -> list[str]:
     return [f"{indent}- key: {key}", f"{indent}  topic: {topic.name}", f"{indent}  type: {topic.msgtype}"]
 
 
-def joint_lists(reader: BagReader, limit: int = _JOINT_MESSAGES_READ) -> dict[str, list[tuple[str, ...]]]:
-    """The distinct joint name lists of each JointState topic, in the order they first appear (two when an
-    arm's and a gripper's driver share /joint_states), from its first ``limit`` messages."""
-    topics = [t.name for t in reader.info.topics if t.msgtype == RosType.JOINT_STATE and t.count]
-    found: dict[str, dict[tuple[str, ...], None]] = {topic: {} for topic in topics}
-    read = dict.fromkeys(topics, 0)
-    for message in reader.messages(tuple(topics)):
-        found[message.topic][tuple(message.msg().name)] = None
-        read[message.topic] += 1
-        if all(n >= limit for n in read.values()):
-            break
-    return {topic: list(lists) for topic, lists in found.items()}
-
-
 def draft_contract_from_bag(reader: BagReader, *, robot_type: str = "my_robot", fps: int = 30) -> str:
     """:func:`draft_contract` of an open bag, its JointState entries naming the joints each publisher sends."""
-    return draft_contract(reader.info, robot_type=robot_type, fps=fps, joints=joint_lists(reader))
+    topics = [t.name for t in reader.info.topics if t.msgtype == RosType.JOINT_STATE and t.count]
+    joints = joint_lists(reader, topics, _JOINT_MESSAGES_READ)
+    return draft_contract(reader.info, robot_type=robot_type, fps=fps, joints=joints)
 
 
 def _joint_entries(key: str, topic: TopicInfo, lists: Sequence[tuple[str, ...]]) -> list[str]:
@@ -86,7 +75,7 @@ def draft_contract(
     joints: Mapping[str, Sequence[tuple[str, ...]]] | None = None,
 ) -> str:
     """YAML text of a Rosetta-style contract guessed from topic types and names; ``joints`` (see
-    :func:`joint_lists`) names the joints of JointState state entries."""
+    :func:`bagport.decode.joint_state_cdr.joint_lists`) names the joints of JointState state entries."""
     observations: list[str] = []
     actions: list[str] = []
     tasks: list[str] = []

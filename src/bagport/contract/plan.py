@@ -215,6 +215,7 @@ def _source(
     by_joint_name = (
         msgtype == RosType.JOINT_STATE and entry.decoder is None and registered_decoder(msgtype) is None
     )
+    joints = selected_joints(names) if by_joint_name else ()
     return SourceSpec(
         key=entry.key,
         section=section,
@@ -232,8 +233,8 @@ def _source(
         line=line,
         child_frame=entry.selector.child_frame if entry.selector else None,
         parent_frame=entry.selector.parent_frame if entry.selector else None,
-        joints=selected_joints(names) if by_joint_name else (),
-        one_joint_list=by_joint_name and bool(names) and not selected_joints(names),
+        joints=joints,
+        one_joint_list=by_joint_name and bool(names) and not joints,
     )
 
 

@@ -10,23 +10,28 @@ It reads exactly what rosbags reads (its ``deserialize_cdr``: the same alignment
 checks and size check), for the built-in JointState extractor only, and only once the first message
 gave the same values both ways (:func:`joint_state_reader`). Bytes it cannot read whole give ``None``:
 the caller then deserialises them with rosbags, whose error names what is wrong with them.
+
+The same name lookup tells which messages of a topic publishers with different joints share are a
+stream's samples (``bagport.episode.samples``), and :func:`joint_lists` what joint lists a topic has.
 """
 
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 import numpy.typing as npt
 
+from bagport.bags import BagMessage, BagReader
 from bagport.decode.custom import registered_decoder
 from bagport.decode.paths import VectorExtractor
 from bagport.decode.vector import ExtractorSource
 from bagport.errors import DecodeError
 from bagport.msgtypes import RosType
 
-__all__ = ["JointStateArrays", "JointStateCdr", "joint_state_reader"]
+__all__ = ["JointStateArrays", "JointStateCdr", "joint_lists", "joint_state_reader"]
 
 _U32 = struct.Struct("<I")
 _CDR_LE = b"\x00\x01"
@@ -86,16 +91,26 @@ class JointStateCdr:
         if body is None:
             return None
         try:
-            found = self._names(body)
+            found = self._parse_names(body)  # none of the known lists: read and remember this one
         except (struct.error, ValueError, UnicodeDecodeError):
             return None
         return None if found is None else found[0]
+
+    def names_of(self, message: BagMessage) -> tuple[str, ...]:
+        """The joint names of a JointState message: from its bytes, else (ROS 1, big-endian, bytes rosbags
+        must judge) from the deserialised message."""
+        raw = message.cdr
+        names = None if raw is None else self.names(raw)
+        return tuple(message.msg().name) if names is None else names
 
     def _names(self, body: bytes) -> tuple[tuple[str, ...], int] | None:
         """The names and the offset after them."""
         for region, names in self._known:
             if body.startswith(region, _STAMP_BYTES):
                 return names, _STAMP_BYTES + len(region)
+        return self._parse_names(body)
+
+    def _parse_names(self, body: bytes) -> tuple[tuple[str, ...], int] | None:
         pos = _STAMP_BYTES
         frame_id_bytes = _U32.unpack_from(body, pos)[0]
         if not _whole_string(body, pos, frame_id_bytes):
@@ -141,6 +156,22 @@ class JointStateCdr:
             names.append(body[pos + 4 : pos + 3 + length].decode())
             pos += 4 + length
         return pos, tuple(names)
+
+
+def joint_lists(reader: BagReader, topics: Sequence[str], limit: int) -> dict[str, list[tuple[str, ...]]]:
+    """The distinct joint name lists of each JointState topic in ``topics``, in the order they first appear
+    (two when an arm's and a gripper's driver share /joint_states), from its first ``limit`` messages."""
+    found: dict[str, dict[tuple[str, ...], None]] = {topic: {} for topic in topics}
+    if not found:
+        return {}
+    readers = {topic: JointStateCdr() for topic in found}
+    read = dict.fromkeys(found, 0)
+    for message in reader.messages(tuple(found)):
+        found[message.topic][readers[message.topic].names_of(message)] = None
+        read[message.topic] += 1
+        if all(n >= limit for n in read.values()):
+            break
+    return {topic: list(lists) for topic, lists in found.items()}
 
 
 def _body(raw: bytes | memoryview) -> bytes | None:

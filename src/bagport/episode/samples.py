@@ -13,7 +13,7 @@ from bagport.contract.plan import ImageFilter, JointFilter, StreamFilter, Transf
 from bagport.decode import child_frames, find_transform, transform_stamp_ns
 from bagport.decode.joint_state_cdr import JointStateCdr
 
-__all__ = ["JointListGuard", "SampleTest", "sample_tests"]
+__all__ = ["MIXED_JOINT_LISTS_FIX", "JointListGuard", "SampleTest", "mixed_joint_lists", "sample_tests"]
 
 _SEEN_KEPT = 30
 """What other samples a topic had (frames, joint lists), kept for the error when none is the stream's."""
@@ -93,15 +93,10 @@ class _JointTest(SampleTest):
         self._joints_seen: set[str] = set()
 
     def carries(self, message: BagMessage) -> bool:
-        raw = message.cdr
-        names = None if raw is None else self._reader.names(raw)
+        names = self._reader.names_of(message)
         last_names, last_carries = self._last
-        if (
-            names is not None and names is last_names
-        ):  # the reader hands back the same tuple for the same names
+        if names is last_names:  # the reader hands back the same tuple for the same names
             return last_carries
-        if names is None:  # ROS 1, big-endian, or bytes rosbags must judge
-            names = tuple(message.msg().name)
         carries = next((c for known, c in self._recent if known is names), None)
         if carries is None:
             carries = set(self._joints) <= set(names)
@@ -180,32 +175,29 @@ class JointListGuard:
     """A JointState topic an entry reads by index alone (``position[0]``): its messages must all name the same
     joints in the same order, or the entry would mix two publishers' arrays without a sign."""
 
-    def __init__(self, topic: str) -> None:
-        self.topic = topic
+    def __init__(self) -> None:
         self._reader = JointStateCdr()
         self._first: tuple[str, ...] | None = None
 
     def other_list(self, message: BagMessage) -> tuple[tuple[str, ...], tuple[str, ...]] | None:
         """``(the first message's names, this one's)`` when they differ, else ``None``."""
-        raw = message.cdr
-        names = None if raw is None else self._reader.names(raw)
-        if names is None:
-            names = tuple(message.msg().name)
+        names = self._reader.names_of(message)
         if self._first is None:
             self._first = names
         elif names is not self._first and names != self._first:
             return self._first, names
         return None
 
-    def problem(self, lists: tuple[tuple[str, ...], tuple[str, ...]], entry: str) -> str:
-        first, other = lists
-        return (
-            f"{self.topic} carries messages naming different joints ({list(first)}, then {list(other)}): "
-            f"publishers with different joints share it, and the entry ({entry}) selects by index, which would mix their "
-            "arrays"
-        )
 
-    fix = (
-        "select the joints by name in selector.names (an entry then reads only the messages naming them); give "
-        "each publisher's joints an entry of their own with the same key."
+def mixed_joint_lists(topic: str, first: tuple[str, ...], other: tuple[str, ...], entry: str) -> str:
+    """What is wrong with an entry reading ``topic`` by index alone when its messages name different joints."""
+    return (
+        f"{topic} carries messages naming different joints ({list(first)}, then {list(other)}): publishers with "
+        f"different joints share it, and the entry ({entry}) selects by index, which would mix their arrays"
     )
+
+
+MIXED_JOINT_LISTS_FIX = (
+    "select the joints by name in selector.names (an entry then reads only the messages naming them); give "
+    "each publisher's joints an entry of their own with the same key."
+)

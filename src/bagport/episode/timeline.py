@@ -18,7 +18,13 @@ from bagport.bags import BagMessage, BagReader
 from bagport.contract import ContractPlan, FeatureKind
 from bagport.contract.plan import StreamFilter
 from bagport.decode.video import KeyframeGate, video_packet
-from bagport.episode.samples import JointListGuard, SampleTest, sample_tests
+from bagport.episode.samples import (
+    MIXED_JOINT_LISTS_FIX,
+    JointListGuard,
+    SampleTest,
+    mixed_joint_lists,
+    sample_tests,
+)
 from bagport.episode.video import keyframe_before
 from bagport.errors import AlignmentError, BagReadError, DecodeError
 from bagport.msgtypes import VIDEO_TYPES
@@ -163,9 +169,8 @@ def _check_samples_found(
                 "or leave the topic out of the contract.",
             )
     for stream, test in tests.items():
-        if (
-            stream in log and not log[stream] and passed_over.get(stream)
-        ):  # none at all: the window's check says so
+        # no message of the topic at all is not the filter's to say: the window's or the bag's checks say it
+        if stream in log and not log[stream] and passed_over.get(stream):
             entry = f" ({entries[stream]})" if stream in entries else ""
             raise AlignmentError(
                 f"no message on {test.spec.topic} carries {test.wanted()} ({test.seen_text()}){entry}",
@@ -241,7 +246,10 @@ def _check_joint_list(
     guard = guards.get(message.topic)
     if guard is not None and (lists := guard.other_list(message)) is not None:
         raise AlignmentError(
-            guard.problem(lists, entries[message.topic]), uri=uri, topic=message.topic, fix=guard.fix
+            mixed_joint_lists(message.topic, *lists, entries[message.topic]),
+            uri=uri,
+            topic=message.topic,
+            fix=MIXED_JOINT_LISTS_FIX,
         )
 
 
@@ -275,7 +283,7 @@ def scan_timeline(
     gates, prerolls = _video_gates(reader, dict.fromkeys(video_topics), window_ns)
     wanted = tuple(dict.fromkeys((*streams.by_topic, *task_set)))
     one_joint_lists = one_joint_lists or {}
-    guards = {topic: JointListGuard(topic) for topic in one_joint_lists}
+    guards = {topic: JointListGuard() for topic in one_joint_lists}
     for message in reader.messages(wanted, start_ns=start_ns, stop_ns=stop_ns):
         if message.topic in task_set:
             tasks.append(_task_message(message))
